@@ -1,0 +1,36 @@
+"""Expert-demo generators: the maze's shortest-path expert, classic-control controllers, the
+random policy of pre-demonstrations, and an episode recorder."""
+
+from abco_envs.experts.classic import CONTROLLERS, controller_for
+from abco_envs.experts.maze import MazeExpert
+from abco_envs.experts.random_policy import RandomPolicy
+from abco_envs.experts.rollout import EpisodeRecord, Policy, record_episode
+
+
+def expert_policy(env_id: str, seed: int | None = None) -> Policy:
+    """The expert of any of the six envs as a ``policy(obs, info) -> action``.
+
+    Mazes get a :class:`MazeExpert` (ties broken by ``seed``); classic-control ids get their
+    deterministic controller (``seed`` unused).
+
+    Raises:
+        ValueError: ``env_id`` has no expert.
+    """
+    from abco_envs import MAZE_IDS
+
+    if env_id.split(":")[-1] in MAZE_IDS:
+        return MazeExpert(seed=seed)
+    controller = controller_for(env_id)
+    return lambda obs, info: controller(obs)
+
+
+__all__ = [
+    "CONTROLLERS",
+    "EpisodeRecord",
+    "MazeExpert",
+    "Policy",
+    "RandomPolicy",
+    "controller_for",
+    "expert_policy",
+    "record_episode",
+]

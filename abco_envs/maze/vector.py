@@ -1,0 +1,246 @@
+"""A native batched maze: all mazes step in one numpy call.
+
+Reached with ``gym.make_vec("AbcoMaze5x5-v0", num_envs=256,
+vectorization_mode="vector_entry_point")``. It equals ``SyncVectorEnv`` over
+:class:`~abco_envs.maze.env.MazeEnv` step for step: the same per-env seeds (``seed + i``), the
+same layout draws, next-step autoreset, and the same ``info`` keys with their ``_key`` masks.
+
+Frames are cheap: each maze keeps its background (walls, start, goal; redrawn only on reset),
+and a step copies all backgrounds at once and writes every agent's dot with one flat
+fancy-index assignment, whose byte offsets are precomputed per cell.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from abco_envs.maze.env import (
+    _check_options,
+    resolve_image_size,
+    state_features,
+    state_observation_space,
+)
+from abco_envs.maze.layout import (
+    DELTAS,
+    OPEN_BITS,
+    generate_layout,
+    layout_hash,
+    validate_layout,
+)
+from abco_envs.maze.pool import LOOP_FRACTION, layout_pool
+from abco_envs.maze.render import AGENT, MazeRenderer
+
+__all__ = ["MazeVectorEnv"]
+
+
+def _per_env(value: Any, num_envs: int, single_ndim: int, name: str) -> list[Any]:
+    """A reset option given once for all mazes, or once per maze (one more leading axis)."""
+    if value is None or np.ndim(value) == single_ndim:
+        return [value] * num_envs
+    if np.ndim(value) == single_ndim + 1 and len(value) == num_envs:
+        return list(value)
+    raise ValueError(
+        f"reset option {name!r} must be given once or once per maze ({num_envs} values),"
+        f" got an array of shape {np.shape(value)}"
+    )
+
+
+class MazeVectorEnv(VectorEnv):
+    """``num_envs`` mazes of one size stepped together (see :class:`MazeEnv` for the rules).
+
+    Reset options may be given per maze: ``layout_index`` and ``start`` as sequences of
+    ``num_envs`` values, ``layout`` as an ``(num_envs, n, n)`` array.
+
+    Example:
+        >>> import gymnasium as gym
+        >>> import abco_envs
+        >>> envs = gym.make_vec("AbcoMaze3x3-v0", num_envs=4, vectorization_mode="vector_entry_point")
+        >>> obs, info = envs.reset(seed=0)
+        >>> obs.shape
+        (4, 64, 64, 3)
+        >>> obs, rewards, terminated, truncated, info = envs.step(envs.action_space.sample())
+        >>> envs.close()
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        size: int = 5,
+        obs_type: str = "image",
+        image_size: int | tuple[int, int] = 64,
+        split: str = "train",
+        max_episode_steps: int | None = 1000,
+        render_mode: str | None = None,
+    ) -> None:
+        _check_options(size, obs_type, split)
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be at least 1, got {num_envs}")
+        self.num_envs, self.size, self.obs_type, self.split = num_envs, size, obs_type, split
+        self.render_mode = render_mode
+        self.max_episode_steps = max_episode_steps if max_episode_steps is not None else np.inf
+        self.renderer = MazeRenderer(size, *resolve_image_size(image_size))
+        self.single_action_space = spaces.Discrete(4)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        if obs_type == "image":
+            self.single_observation_space = spaces.Box(
+                0, 255, (self.renderer.height, self.renderer.width, 3), dtype=np.uint8
+            )
+        else:
+            self.single_observation_space = state_observation_space(size)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+
+        if split != "procedural":
+            pool = layout_pool(size)
+            self._pool, self._pool_ids = pool.split(split), pool.ids(split)
+            self._pool_backgrounds: dict[int, np.ndarray] = {}
+        n, h, w = size, self.renderer.height, self.renderer.width
+        self._rngs = [seeding.np_random()[0] for _ in range(num_envs)]
+        self.cells = np.zeros((num_envs, n, n), dtype=np.uint8)
+        self.positions = np.zeros((num_envs, 2), dtype=np.int64)
+        self.layout_ids = np.full(num_envs, None, dtype=object)
+        self.layout_indices = np.full(num_envs, -1, dtype=np.int64)
+        self._steps = np.zeros(num_envs, dtype=np.int64)
+        self._needs_reset = np.zeros(num_envs, dtype=bool)
+        self._backgrounds = np.zeros((num_envs, h, w, 3), dtype=np.uint8)
+        # Byte offsets of each cell's dot inside one frame, and the dot's bytes.
+        dots = self.renderer.dot_pixels
+        self._dot_bytes = (dots[:, :, None] * 3 + np.arange(3)).reshape(len(dots), -1)
+        self._dot_colour = np.tile(AGENT, dots.shape[1])
+        self._frame_bytes = h * w * 3
+        self._walls = np.zeros((num_envs, 4 * n * n), dtype=np.float32)
+        self._arange = np.arange(num_envs)
+        self._goal = n - 1
+        self._step_penalty = -0.1 / (n * n)
+
+    # -- resets -------------------------------------------------------------------------------
+
+    def _background(self, index: int, cells: np.ndarray) -> np.ndarray:
+        if index < 0:
+            return self.renderer.background(cells)
+        if index not in self._pool_backgrounds:
+            self._pool_backgrounds[index] = self.renderer.background(cells)
+        return self._pool_backgrounds[index]
+
+    def _reset_one(self, i: int, layout: Any = None, index: Any = None, start: Any = None) -> None:
+        """Reset maze ``i`` exactly as ``MazeEnv.reset`` would (same draws from its rng)."""
+        rng = self._rngs[i]
+        if layout is not None:
+            cells, idx, lid = validate_layout(layout, self.size), -1, None
+        elif self.split == "procedural":
+            cells, idx, lid = generate_layout(self.size, rng, LOOP_FRACTION), -1, None
+        else:
+            idx = int(rng.integers(len(self._pool))) if index is None else int(index)
+            if not 0 <= idx < len(self._pool):
+                raise IndexError(
+                    f"layout_index {idx} out of range for the {self.split!r} split"
+                    f" of {len(self._pool)} layouts"
+                )
+            cells, lid = self._pool[idx], self._pool_ids[idx]
+        if lid is None:
+            lid = layout_hash(cells)
+        row, col = (0, 0) if start is None else (int(start[0]), int(start[1]))
+        if not (0 <= row < self.size and 0 <= col < self.size):
+            raise ValueError(f"start {start} is outside the {self.size}x{self.size} maze")
+        self.cells[i] = cells
+        self.layout_indices[i], self.layout_ids[i] = idx, lid
+        self.positions[i] = row, col
+        self._steps[i] = 0
+        self._walls[i] = state_features(cells)
+        self._backgrounds[i] = self._background(idx, cells)
+
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset every maze; an int ``seed`` seeds maze ``i`` with ``seed + i``."""
+        super().reset(seed=seed)
+        if seed is not None:
+            seeds = [seed + i for i in range(self.num_envs)] if isinstance(seed, int) else seed
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"expected {self.num_envs} seeds, got {len(seeds)}")
+            self._rngs = [seeding.np_random(s)[0] for s in seeds]
+        options = options or {}
+        layouts = _per_env(options.get("layout"), self.num_envs, 2, "layout")
+        indices = _per_env(options.get("layout_index"), self.num_envs, 0, "layout_index")
+        starts = _per_env(options.get("start"), self.num_envs, 1, "start")
+        for i in range(self.num_envs):
+            self._reset_one(i, layouts[i], indices[i], starts[i])
+        self._needs_reset[:] = False
+        return self._observe(), self._infos(reset=np.ones(self.num_envs, dtype=bool))
+
+    # -- stepping -----------------------------------------------------------------------------
+
+    def step(
+        self, actions: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Step every maze; a maze that ended on the last step is reset instead (next-step)."""
+        actions = np.asarray(actions).astype(np.int64, copy=False).reshape(-1)
+        if actions.shape != (self.num_envs,):
+            raise ValueError(f"expected {self.num_envs} actions, got shape {actions.shape}")
+        if actions.min() < 0 or actions.max() > 3:
+            raise ValueError("invalid action: expected 0 (N), 1 (S), 2 (E) or 3 (W) per maze")
+        resetting = self._needs_reset.copy()
+        for i in np.flatnonzero(resetting):
+            self._reset_one(int(i))
+        active = ~resetting
+
+        rows, cols = self.positions[:, 0], self.positions[:, 1]
+        is_open = (self.cells[self._arange, rows, cols] & OPEN_BITS[actions]) > 0
+        moved = np.flatnonzero(active & is_open)
+        self.positions[moved] += DELTAS[actions[moved]]
+        self._steps[active] += 1
+
+        at_goal = (self.positions[:, 0] == self._goal) & (self.positions[:, 1] == self._goal)
+        terminated = active & at_goal
+        truncated = active & (self._steps >= self.max_episode_steps)
+        rewards = np.where(terminated, 1.0, self._step_penalty)
+        rewards[resetting] = 0.0
+        self._needs_reset = terminated | truncated
+        return self._observe(), rewards, terminated, truncated, self._infos(resetting)
+
+    def _frames(self) -> np.ndarray:
+        """Fresh frames of every maze: the backgrounds plus each agent's dot."""
+        frames = self._backgrounds.copy()
+        cells = self.positions[:, 0] * self.size + self.positions[:, 1]
+        offsets = self._dot_bytes[cells] + (self._arange * self._frame_bytes)[:, None]
+        frames.reshape(-1)[offsets.ravel()] = np.broadcast_to(
+            self._dot_colour, offsets.shape
+        ).ravel()
+        return frames
+
+    def _observe(self) -> np.ndarray:
+        if self.obs_type == "image":
+            return self._frames()
+        n = self.size
+        obs = np.zeros((self.num_envs, 2 * n + 4 * n * n), dtype=np.float32)
+        obs[self._arange, self.positions[:, 0]] = 1.0
+        obs[self._arange, n + self.positions[:, 1]] = 1.0
+        obs[:, 2 * n :] = self._walls
+        return obs
+
+    def _infos(self, reset: np.ndarray) -> dict[str, Any]:
+        """Infos batched as ``SyncVectorEnv`` batches them, ``_key`` masks included."""
+        every = np.ones(self.num_envs, dtype=bool)
+        infos: dict[str, Any] = {
+            "position": self.positions.copy(),
+            "_position": every,
+            "layout_id": self.layout_ids.copy(),
+            "_layout_id": every.copy(),
+        }
+        if reset.any():
+            infos["layout_index"] = np.where(reset, self.layout_indices, 0)
+            infos["_layout_index"] = reset.copy()
+        return infos
+
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        """``rgb_array``: one frame per maze."""
+        if self.render_mode != "rgb_array":
+            return None
+        return tuple(self._frames())
