@@ -18,7 +18,7 @@ Example:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
@@ -67,7 +67,7 @@ class LayoutPool:
         return self.train_ids if name == "train" else self.test_ids
 
 
-@lru_cache(maxsize=None)
+@cache
 def layout_pool(size: int) -> LayoutPool:
     """Build (once per process) the canonical pool of ``size`` x ``size`` mazes."""
     rng = np.random.default_rng([_POOL_SEED, size])

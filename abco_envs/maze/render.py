@@ -53,9 +53,10 @@ class MazeRenderer:
                 cy = (self.rows[r] + self.rows[r + 1] - 1) / 2
                 cx = (self.cols[c] + self.cols[c + 1] - 1) / 2
                 ys, xs = np.mgrid[self.rows[r] : self.rows[r + 1], self.cols[c] : self.cols[c + 1]]
-                inside = (ys - cy) ** 2 + (xs - cx) ** 2 <= radius**2
-                if not inside.any():  # tiny cells: at least the centre pixel
-                    inside[(ys - cy) ** 2 + (xs - cx) ** 2 == ((ys - cy) ** 2 + (xs - cx) ** 2).min()] = True
+                dist2 = (ys - cy) ** 2 + (xs - cx) ** 2
+                inside = dist2 <= radius**2
+                if not inside.any():  # tiny cells: at least the centre pixel(s)
+                    inside = dist2 == dist2.min()
                 per_cell.append((ys[inside] * self.width + xs[inside]).ravel())
         longest = max(len(p) for p in per_cell)
         # Pad by repeating a pixel: writing it twice is harmless and keeps one array.

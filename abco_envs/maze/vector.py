@@ -60,7 +60,9 @@ class MazeVectorEnv(VectorEnv):
     Example:
         >>> import gymnasium as gym
         >>> import abco_envs
-        >>> envs = gym.make_vec("AbcoMaze3x3-v0", num_envs=4, vectorization_mode="vector_entry_point")
+        >>> envs = gym.make_vec(
+        ...     "AbcoMaze3x3-v0", num_envs=4, vectorization_mode="vector_entry_point"
+        ... )
         >>> obs, info = envs.reset(seed=0)
         >>> obs.shape
         (4, 64, 64, 3)
