@@ -195,6 +195,7 @@ def test_pickling_keeps_the_episode(env_id):
     assert np.array_equal(a[0], b[0]) and a[1:4] == b[1:4]
 
 
+@pytest.mark.filterwarnings("ignore:.*matplotlib is not installed")  # play() probes TkAgg
 def test_human_mode_and_play_work_headless(monkeypatch):
     pygame = pytest.importorskip("pygame")
     from gymnasium.utils import play
