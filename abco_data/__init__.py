@@ -1,0 +1,65 @@
+"""abco_data: the datasets of the ABCO paper as verified, deterministic HDF5 files.
+
+Twelve datasets (expert states and random-policy pre-demonstrations for six environments),
+each one HDF5 file in the versioned format of ``docs/format.md``. :func:`load` gets one from
+the cache, the Hugging Face Hub, or local generation; :func:`open_dataset` reads a file;
+:func:`verify` checks every byte of one. ``import abco_data`` does not import torch.
+
+Example:
+    >>> import abco_data
+    >>> len(abco_data.DATASET_IDS)
+    12
+    >>> abco_data.dataset_id("CartPole-v1", "pre_demonstrations")
+    'abco/cartpole-pre-v0'
+"""
+
+from abco_data.dataset import Dataset, DatasetArrays, Episode, open_dataset
+from abco_data.errors import (
+    ChecksumError,
+    CorruptDatasetError,
+    DatasetError,
+    DatasetNotAvailableError,
+    DatasetWriteError,
+    FormatVersionError,
+    UnknownDatasetError,
+    WrongKindError,
+)
+from abco_data.format import FORMAT_NAME, FORMAT_VERSION
+from abco_data.generate import GENERATOR_VERSION, data_home, generate
+from abco_data.hub import download, load, push
+from abco_data.reference import ReferenceReturns
+from abco_data.registry import DATASET_IDS, DatasetSpec, dataset_id, spec
+from abco_data.verify import VerifyReport, sha256_of, verify
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ChecksumError",
+    "CorruptDatasetError",
+    "DATASET_IDS",
+    "Dataset",
+    "DatasetArrays",
+    "DatasetError",
+    "DatasetNotAvailableError",
+    "DatasetSpec",
+    "DatasetWriteError",
+    "Episode",
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "FormatVersionError",
+    "GENERATOR_VERSION",
+    "ReferenceReturns",
+    "UnknownDatasetError",
+    "VerifyReport",
+    "WrongKindError",
+    "data_home",
+    "dataset_id",
+    "download",
+    "generate",
+    "load",
+    "open_dataset",
+    "push",
+    "sha256_of",
+    "spec",
+    "verify",
+]

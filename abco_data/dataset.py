@@ -1,0 +1,378 @@
+"""Reading abco datasets: :func:`open_dataset`, :class:`Dataset` and :class:`Episode`.
+
+A transition ``k`` pairs observation rows ``obs_t[k]`` and ``obs_t[k] + 1`` of the flat
+``observations`` column; both always lie in the same episode (each episode stores its ``T + 1``
+observations, the final one included).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+from gymnasium import spaces
+
+from abco_data.errors import CorruptDatasetError, WrongKindError
+from abco_data.format import check_header, open_h5, read_column, read_rows, space_from_json
+from abco_data.reference import ReferenceReturns
+
+__all__ = ["Dataset", "Episode", "DatasetArrays", "open_dataset"]
+
+
+@dataclass(frozen=True, eq=False)
+class Episode:
+    """One episode: ``T + 1`` observations and ``T`` of everything else.
+
+    ``actions`` is ``None`` for expert data (whose actions are kept apart, for measuring IDM
+    accuracy only). ``layout``, ``layout_index`` and ``positions`` are ``None`` outside mazes.
+    """
+
+    index: int
+    seed: int
+    observations: np.ndarray
+    actions: np.ndarray | None
+    rewards: np.ndarray
+    terminations: np.ndarray
+    truncations: np.ndarray
+    episode_return: float
+    layout: np.ndarray | None = None
+    layout_index: int | None = None
+    positions: np.ndarray | None = None
+
+    @property
+    def length(self) -> int:
+        """Number of transitions ``T``."""
+        return len(self.rewards)
+
+
+@dataclass(frozen=True, eq=False)
+class DatasetArrays:
+    """Every column of a dataset in memory (see ``docs/format.md`` for each one).
+
+    ``actions`` is set for pre-demonstrations, ``idm_eval_actions`` for expert data (never
+    for training). Maze-only columns are ``None`` elsewhere.
+    """
+
+    observations: np.ndarray
+    actions: np.ndarray | None
+    idm_eval_actions: np.ndarray | None
+    rewards: np.ndarray
+    terminations: np.ndarray
+    truncations: np.ndarray
+    episode_starts: np.ndarray
+    episode_transition_starts: np.ndarray
+    episode_lengths: np.ndarray
+    episode_seeds: np.ndarray
+    episode_returns: np.ndarray
+    positions: np.ndarray | None = None
+    layouts: np.ndarray | None = None
+    layout_indices: np.ndarray | None = None
+
+    @property
+    def nbytes(self) -> int:
+        """Total bytes of the arrays."""
+        return sum(v.nbytes for v in vars(self).values() if isinstance(v, np.ndarray))
+
+
+_ARRAY_COLUMNS = {
+    "observations": "observations", "actions": "actions", "idm_eval_actions": "idm_eval_actions",
+    "rewards": "rewards", "terminations": "terminations", "truncations": "truncations",
+    "episode_starts": "episodes/obs_offset", "episode_transition_starts":
+    "episodes/transition_offset", "episode_lengths": "episodes/length",
+    "episode_seeds": "episodes/seed", "episode_returns": "episodes/return",
+    "positions": "positions", "layouts": "episodes/layout",
+    "layout_indices": "episodes/layout_index",
+}
+
+
+def _read(ds: h5py.Dataset, path: Path) -> np.ndarray:
+    """Read a whole column into one fresh array (a single allocation)."""
+    out = np.empty(ds.shape, dtype=ds.dtype)
+    try:
+        if out.size:
+            read_column(ds, out)
+    except OSError as err:
+        raise CorruptDatasetError(f"{path}: column {ds.name} cannot be read (corrupt or"
+                                  f" truncated data): {err}") from err
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Dataset:
+    """An opened abco dataset file (see :func:`open_dataset`).
+
+    Attributes:
+        path: The file.
+        id: Dataset id, e.g. ``"abco/maze5x5-expert-v0"``.
+        kind: ``"expert"`` or ``"pre_demonstrations"``.
+        env_id: Gymnasium id of the environment.
+        num_episodes: Number of episodes.
+        num_transitions: Number of transitions (``num_observations - num_episodes``).
+        attrs: Every root attribute, JSON strings left as they are.
+        observation_space: The env's observation space.
+        action_space: The env's action space.
+        reference: Reference returns for Performance ``P``.
+    """
+
+    path: Path
+    id: str
+    kind: str
+    env_id: str
+    num_episodes: int
+    num_transitions: int
+    attrs: Mapping[str, Any]
+    observation_space: spaces.Space[Any]
+    action_space: spaces.Space[Any]
+    reference: ReferenceReturns
+    _index: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    _handle: dict[int, h5py.File] = field(default_factory=dict, repr=False)
+
+    # -- file access -------------------------------------------------------------------------
+
+    def _file(self) -> h5py.File:
+        """An h5py handle owned by this process (reopened after a fork)."""
+        pid = os.getpid()
+        if pid not in self._handle:
+            self._handle.clear()
+            self._handle[pid] = h5py.File(self.path, "r")
+        return self._handle[pid]
+
+    def close(self) -> None:
+        """Close the file handle (it reopens on the next read)."""
+        for f in self._handle.values():
+            f.close()
+        self._handle.clear()
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(vars(self))
+        state["_handle"] = {}
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        for k, v in state.items():
+            object.__setattr__(self, k, v)
+
+    @property
+    def is_maze(self) -> bool:
+        """Whether episodes carry maze layouts and positions."""
+        return "positions" in self._file()
+
+    @property
+    def action_column(self) -> str:
+        """``"actions"`` (pre-demonstrations) or ``"idm_eval_actions"`` (expert data)."""
+        return "actions" if self.kind == "pre_demonstrations" else "idm_eval_actions"
+
+    def _episode_index(self) -> dict[str, np.ndarray]:
+        if not self._index:
+            f = self._file()
+            for key in ("obs_offset", "transition_offset", "length", "seed", "return"):
+                self._index[key] = _read(f[f"episodes/{key}"], self.path)
+        return self._index
+
+    # -- episodes -----------------------------------------------------------------------------
+
+    def episode(self, i: int) -> Episode:
+        """Episode ``i`` (negative indices count from the end).
+
+        Raises:
+            IndexError: ``i`` out of range.
+        """
+        if not -self.num_episodes <= i < self.num_episodes:
+            raise IndexError(f"episode {i} out of range: {self.path} has"
+                             f" {self.num_episodes} episodes")
+        i %= self.num_episodes
+        idx, f = self._episode_index(), self._file()
+        o, t, n = (int(idx[k][i]) for k in ("obs_offset", "transition_offset", "length"))
+        maze = "positions" in f
+        return Episode(
+            index=i, seed=int(idx["seed"][i]), observations=f["observations"][o : o + n + 1],
+            actions=f["actions"][t : t + n] if self.kind == "pre_demonstrations" else None,
+            rewards=f["rewards"][t : t + n], terminations=f["terminations"][t : t + n],
+            truncations=f["truncations"][t : t + n], episode_return=float(idx["return"][i]),
+            layout=f["episodes/layout"][i] if maze else None,
+            layout_index=int(f["episodes/layout_index"][i]) if maze else None,
+            positions=f["positions"][o : o + n + 1] if maze else None,
+        )
+
+    def episodes(self) -> Iterator[Episode]:
+        """Every episode, in order."""
+        for i in range(self.num_episodes):
+            yield self.episode(i)
+
+    # -- flat views ---------------------------------------------------------------------------
+
+    def load_arrays(self) -> DatasetArrays:
+        """Every column in memory as numpy arrays (each read into one allocation)."""
+        f = self._file()
+        cols = {name: (_read(f[col], self.path) if col in f else None)
+                for name, col in _ARRAY_COLUMNS.items()}
+        return DatasetArrays(**cols)
+
+    def transition_index(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(obs_t, obs_t1)``: rows of ``observations`` of each transition's ``s`` and ``s'``.
+
+        Both are int64 arrays of length ``num_transitions``; ``obs_t1 = obs_t + 1`` and never
+        crosses into the next episode.
+        """
+        idx = self._episode_index()
+        shift = np.repeat(idx["obs_offset"] - idx["transition_offset"], idx["length"])
+        obs_t = np.arange(self.num_transitions, dtype=np.int64) + shift
+        return obs_t, obs_t + 1
+
+    def read_transitions(self, indices: np.ndarray | Sequence[int]
+                         ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """``(s, a, s')`` of the given transitions, read with one sorted HDF5 read.
+
+        ``a`` is ``None`` for expert data. Rows come back in the order of ``indices``.
+        """
+        items = np.asarray(indices, dtype=np.int64)
+        if items.size and (items.min() < 0 or items.max() >= self.num_transitions):
+            raise IndexError(f"transition index out of range: {self.path} has"
+                             f" {self.num_transitions} transitions")
+        obs_t, _ = self.transition_index()
+        rows = obs_t[items]
+        try:
+            block = read_rows(self._file()["observations"], np.concatenate([rows, rows + 1]))
+        except OSError as err:
+            raise CorruptDatasetError(f"{self.path}: observations cannot be read: {err}") from err
+        actions = None
+        if self.kind == "pre_demonstrations":
+            actions = self._file()["actions"][()][items] if items.size else items
+        return block[: len(rows)], actions, block[len(rows) :]
+
+    def actions_of_transitions(self, *, idm_eval: bool = False) -> np.ndarray:
+        """The action of every transition (int64).
+
+        Args:
+            idm_eval: Allow an expert dataset's ``idm_eval_actions`` (for measuring IDM
+                accuracy only, never for training).
+
+        Raises:
+            WrongKindError: An expert dataset and ``idm_eval`` is False.
+        """
+        if self.kind == "expert" and not idm_eval:
+            raise WrongKindError(
+                f"{self.path}: expert data has no training actions; its idm_eval_actions are"
+                " for measuring IDM accuracy only (pass idm_eval=True to read them)")
+        return _read(self._file()[self.action_column], self.path)
+
+    def sample_by_action(self, counts: Sequence[int] | Mapping[int, int] | np.ndarray,
+                         rng: np.random.Generator | int | None) -> np.ndarray:
+        """Transition indices with ``counts[a]`` transitions of each action class ``a``.
+
+        Uniform within a class, without replacement unless a class has fewer transitions than
+        asked. The result is in random order.
+
+        Args:
+            counts: Per action: a sequence indexed by action, or a mapping action -> count.
+            rng: A numpy Generator or a seed.
+
+        Raises:
+            ValueError: A positive count for an action that never occurs.
+            WrongKindError: An expert dataset (it has no training actions).
+        """
+        rng = np.random.default_rng(rng)
+        actions = self.actions_of_transitions()
+        items = counts.items() if isinstance(counts, Mapping) else enumerate(counts)
+        picked = []
+        for a, c in items:
+            c = int(c)
+            if c <= 0:
+                continue
+            rows = np.flatnonzero(actions == int(a))
+            if not len(rows):
+                raise ValueError(f"{self.path}: no transition has action {a}, {c} asked")
+            picked.append(rng.choice(rows, size=c, replace=c > len(rows)))
+        out = np.concatenate(picked) if picked else np.empty(0, dtype=np.int64)
+        return rng.permutation(out).astype(np.int64)
+
+    def torch_dataset(self, in_memory: bool = False, **kwargs: Any) -> Any:
+        """A ``torch.utils.data.Dataset`` of transitions (see :mod:`abco_data.torch_view`)."""
+        from abco_data.torch_view import TransitionDataset
+
+        return TransitionDataset(self.path, in_memory=in_memory, **kwargs)
+
+
+def _reference(f: h5py.File, attrs: Mapping[str, Any]) -> ReferenceReturns:
+    if "reference/layout_ids" not in f:
+        return ReferenceReturns(float(attrs["reference_expert_mean"]),
+                                float(attrs["reference_random_mean"]))
+    ids = tuple(s.decode() for s in f["reference/layout_ids"][()])
+    splits = tuple(s.decode() for s in f["reference/layout_splits"][()])
+    return ReferenceReturns(
+        float(attrs["reference_expert_mean"]), float(attrs["reference_random_mean"]),
+        ids, splits, f["reference/expert_return"][()], f["reference/random_return"][()])
+
+
+def _check_counts(f: h5py.File, attrs: Mapping[str, Any], path: Path, action_col: str) -> None:
+    n_ep, n_tr = attrs["num_episodes"], attrs["num_transitions"]
+    expect = {"observations": n_tr + n_ep, action_col: n_tr, "rewards": n_tr,
+              "terminations": n_tr, "truncations": n_tr}
+    expect.update({f"episodes/{k}": n_ep for k in
+                   ("obs_offset", "transition_offset", "length", "seed", "return")})
+    if "positions" in f:
+        expect.update({"positions": n_tr + n_ep, "episodes/layout": n_ep,
+                       "episodes/layout_index": n_ep})
+    for col, n in expect.items():
+        if col not in f:
+            raise CorruptDatasetError(f"{path}: missing column {col}")
+        if f[col].shape[0] != n:
+            raise CorruptDatasetError(f"{path}: column {col} has {f[col].shape[0]} rows,"
+                                      f" expected {n} from the root attributes")
+    lengths = _read(f["episodes/length"], path)
+    starts = _read(f["episodes/transition_offset"], path)
+    obs_starts = _read(f["episodes/obs_offset"], path)
+    cum = np.concatenate([[0], np.cumsum(lengths)[:-1]]) if n_ep else lengths
+    if (lengths.sum() != n_tr or np.any(lengths < 1) or np.any(starts != cum)
+            or np.any(obs_starts != starts + np.arange(n_ep))):
+        raise CorruptDatasetError(f"{path}: episode offsets and lengths are inconsistent")
+
+
+def open_dataset(path: str | os.PathLike[str], *, dataset_id: str | None = None,
+                 kind: str | None = None) -> Dataset:
+    """Open and validate an abco dataset file.
+
+    Checks the format name and version, the required attributes and columns, and that the
+    episode offsets agree with the column lengths (reading every value is left to
+    :func:`abco_data.verify`).
+
+    Args:
+        path: The ``.hdf5`` file.
+        dataset_id: If given, the id the file must hold.
+        kind: If given, the kind the file must be (``expert`` | ``pre_demonstrations``).
+
+    Raises:
+        FileNotFoundError: No such file.
+        CorruptDatasetError: Truncated, corrupt, not an abco dataset, or inconsistent.
+        FormatVersionError: Another ``format_version``.
+        WrongKindError: Another id or kind than asked for.
+    """
+    path = Path(path)
+    with open_h5(path) as f:
+        try:
+            attrs = check_header(f, path)
+            if kind is not None and attrs["kind"] != kind:
+                raise WrongKindError(f"{path}: holds {attrs['kind']} data"
+                                     f" ({attrs['dataset_id']}), not {kind}")
+            if dataset_id is not None and attrs["dataset_id"] != dataset_id:
+                raise WrongKindError(f"{path}: holds dataset {attrs['dataset_id']!r},"
+                                     f" not {dataset_id!r}")
+            action_col = "actions" if attrs["kind"] == "pre_demonstrations" \
+                else "idm_eval_actions"
+            _check_counts(f, attrs, path, action_col)
+            reference = _reference(f, attrs)
+            obs_space = space_from_json(attrs["observation_space"])
+            act_space = space_from_json(attrs["action_space"])
+        except (KeyError, ValueError, TypeError, OSError) as err:
+            if isinstance(err, (CorruptDatasetError, WrongKindError)):
+                raise
+            raise CorruptDatasetError(f"{path}: unreadable dataset metadata: {err}") from err
+    return Dataset(
+        path=path, id=attrs["dataset_id"], kind=attrs["kind"], env_id=attrs["env_id"],
+        num_episodes=int(attrs["num_episodes"]), num_transitions=int(attrs["num_transitions"]),
+        attrs=attrs, observation_space=obs_space, action_space=act_space, reference=reference)

@@ -1,0 +1,161 @@
+"""The twelve abco datasets: their ids and the parameters that create each one.
+
+Ids read ``abco/{name}-{kind}-v0``: ``name`` is one of the six environments, ``kind`` is
+``expert`` or ``pre`` (pre-demonstrations), and the trailing version changes whenever the
+bytes of a dataset would.
+
+Example:
+    >>> dataset_id("AbcoMaze5x5-v0", "expert")
+    'abco/maze5x5-expert-v0'
+    >>> s = spec("abco/cartpole-pre-v0")
+    >>> s.env_id, s.kind, s.params["transitions"]
+    ('CartPole-v1', 'pre_demonstrations', 50000)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any
+
+from abco_data.errors import UnknownDatasetError
+
+__all__ = ["DatasetSpec", "DATASET_IDS", "ENV_NAMES", "dataset_id", "spec", "is_maze"]
+
+#: Short dataset name of each environment id.
+ENV_NAMES = {
+    "AbcoMaze3x3-v0": "maze3x3",
+    "AbcoMaze5x5-v0": "maze5x5",
+    "AbcoMaze10x10-v0": "maze10x10",
+    "CartPole-v1": "cartpole",
+    "Acrobot-v1": "acrobot",
+    "MountainCar-v0": "mountaincar",
+}
+_KIND_SUFFIX = {"expert": "expert", "pre_demonstrations": "pre"}
+VERSION = 0
+
+#: Parameters shared by every dataset of a family; ``seed`` is set per dataset below.
+_MAZE_EXPERT = {
+    "layouts": 100,  # the first k layouts of the train split (all 100 by default)
+    "solutions_per_layout": 10,  # expert episodes per layout, each with its own tie-break seed
+    "image_size": 64,
+    "reference_episodes": 100,  # random episodes per layout for the random reference return
+}
+_MAZE_PRE = {
+    "layouts": 100,
+    "episodes_per_layout": 20,
+    "max_steps": 10,  # short random walks from a random start cell (never the goal)
+    "drop_wall_hits": False,  # True drops moves into a wall (s' == s) from the data
+    "image_size": 64,
+    "reference_episodes": 100,
+}
+_CLASSIC_EXPERT = {"episodes": 50, "reference_episodes": 100, "reference_expert_episodes": 20}
+_CLASSIC_PRE = {"transitions": 50_000, "reference_episodes": 100,
+                "reference_expert_episodes": 20}
+
+
+@dataclass(frozen=True)
+class DatasetSpec:
+    """How one dataset is made.
+
+    Attributes:
+        id: The dataset id, e.g. ``"abco/maze5x5-expert-v0"``.
+        env_id: The Gymnasium id of its environment.
+        kind: ``"expert"`` or ``"pre_demonstrations"``.
+        params: Creation parameters (read-only mapping), ``seed`` included.
+    """
+
+    id: str
+    env_id: str
+    kind: str
+    params: Mapping[str, Any]
+
+    @property
+    def is_maze(self) -> bool:
+        """Whether the environment is one of the abco mazes."""
+        return is_maze(self.env_id)
+
+    @property
+    def filename(self) -> str:
+        """File name of the dataset, e.g. ``"maze5x5-expert-v0.hdf5"``."""
+        return self.id.split("/", 1)[1] + ".hdf5"
+
+    def with_overrides(self, **overrides: Any) -> DatasetSpec:
+        """A copy whose parameters are updated by ``overrides`` (only known keys).
+
+        Raises:
+            TypeError: An override that this dataset has no parameter for.
+        """
+        unknown = sorted(set(overrides) - set(self.params))
+        if unknown:
+            raise TypeError(
+                f"{self.id} has no parameter(s) {', '.join(unknown)};"
+                f" known: {', '.join(sorted(self.params))}")
+        return DatasetSpec(self.id, self.env_id, self.kind,
+                           MappingProxyType({**self.params, **overrides}))
+
+
+def is_maze(env_id: str) -> bool:
+    """Whether ``env_id`` is an abco maze id."""
+    return env_id.split(":")[-1].startswith("AbcoMaze")
+
+
+def _normalise_kind(kind: str) -> str:
+    aliases = {"expert": "expert", "pre": "pre_demonstrations",
+               "pre_demonstrations": "pre_demonstrations", "pre-demonstrations":
+               "pre_demonstrations"}
+    if kind not in aliases:
+        raise ValueError(f"unknown dataset kind {kind!r}; expected 'expert' or"
+                         " 'pre_demonstrations'")
+    return aliases[kind]
+
+
+def dataset_id(env_id: str, kind: str) -> str:
+    """The id of the ``kind`` dataset of ``env_id`` (``kind``: expert | pre_demonstrations).
+
+    Raises:
+        UnknownDatasetError: No dataset exists for ``env_id``.
+        ValueError: Unknown ``kind``.
+    """
+    name = ENV_NAMES.get(env_id.split(":")[-1])
+    if name is None:
+        raise UnknownDatasetError(
+            f"no abco dataset for env {env_id!r}; envs with datasets: {', '.join(ENV_NAMES)}")
+    return f"abco/{name}-{_KIND_SUFFIX[_normalise_kind(kind)]}-v{VERSION}"
+
+
+def _build() -> dict[str, DatasetSpec]:
+    specs = {}
+    for i, (env_id, _name) in enumerate(ENV_NAMES.items()):
+        maze = is_maze(env_id)
+        for j, kind in enumerate(("expert", "pre_demonstrations")):
+            if maze:
+                base = _MAZE_EXPERT if kind == "expert" else _MAZE_PRE
+            else:
+                base = _CLASSIC_EXPERT if kind == "expert" else _CLASSIC_PRE
+            # Disjoint seed ranges: 1,000,000 apart per dataset, so episode seeds never meet.
+            params = {**base, "seed": (2 * i + j + 1) * 1_000_000}
+            ds_id = dataset_id(env_id, kind)
+            specs[ds_id] = DatasetSpec(ds_id, env_id, kind, MappingProxyType(params))
+    return specs
+
+
+_SPECS = _build()
+#: The twelve dataset ids, mazes first, expert before pre-demonstrations.
+DATASET_IDS: tuple[str, ...] = tuple(_SPECS)
+
+
+def spec(dataset_id: str) -> DatasetSpec:
+    """The :class:`DatasetSpec` of ``dataset_id``.
+
+    Raises:
+        UnknownDatasetError: An id that is not one of :data:`DATASET_IDS` (the message lists
+            them).
+    """
+    try:
+        return _SPECS[dataset_id]
+    except (KeyError, TypeError):
+        raise UnknownDatasetError(
+            f"unknown dataset id {dataset_id!r}; known ids: {', '.join(DATASET_IDS)}"
+        ) from None

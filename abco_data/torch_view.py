@@ -1,0 +1,117 @@
+"""A ``torch.utils.data.Dataset`` of transitions; the only module of abco_data importing torch.
+
+Items are ``(s, s')`` for expert data and ``(s, a, s')`` for pre-demonstrations, as tensors:
+observations keep their stored dtype (``uint8`` images stay ``uint8``, HWC), actions are int64.
+
+Two modes:
+
+- file-backed (default): each process opens its own h5py handle lazily, on its first read, so a
+  ``DataLoader`` with workers gets one handle per worker (h5py handles must not cross a fork);
+- in memory (``in_memory=True``): the columns are read once, up front; for small datasets.
+
+Example:
+    >>> import tempfile, os, torch, abco_data
+    >>> path = abco_data.generate("abco/maze3x3-pre-v0", os.path.join(tempfile.mkdtemp(),
+    ...     "p.hdf5"), progress=False, layouts=1, episodes_per_layout=2, reference_episodes=2)
+    >>> view = abco_data.open_dataset(path).torch_dataset()
+    >>> s, a, s1 = view[0]
+    >>> s.shape, s.dtype, a.dtype
+    (torch.Size([64, 64, 3]), torch.uint8, torch.int64)
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import torch
+from torch.utils.data import Dataset as TorchDataset
+
+from abco_data.dataset import open_dataset
+from abco_data.format import read_rows
+
+__all__ = ["TransitionDataset"]
+
+
+class TransitionDataset(TorchDataset):
+    """Transitions of one abco dataset file.
+
+    Args:
+        path: The dataset file.
+        in_memory: Read every column into memory now instead of reading rows on demand.
+        indices: Optional transition indices (e.g. from ``Dataset.sample_by_action``); item
+            ``i`` is then transition ``indices[i]``.
+        idm_eval_actions: For expert data, yield ``(s, a, s')`` with the expert's actions
+            (for measuring IDM accuracy only, never for training).
+    """
+
+    def __init__(self, path: str | os.PathLike[str], in_memory: bool = False,
+                 indices: np.ndarray | None = None, idm_eval_actions: bool = False) -> None:
+        ds = open_dataset(path)
+        self.path = Path(path)
+        self.kind = ds.kind
+        self.with_actions = ds.kind == "pre_demonstrations" or idm_eval_actions
+        self.obs_t, _ = ds.transition_index()
+        self.actions = ds.actions_of_transitions(idm_eval=True) if self.with_actions else None
+        self.indices = None if indices is None else np.asarray(indices, dtype=np.int64)
+        self.observations = ds.load_arrays().observations if in_memory else None
+        ds.close()
+        self._file: h5py.File | None = None
+        self._pid = -1
+
+    def __len__(self) -> int:
+        return len(self.obs_t) if self.indices is None else len(self.indices)
+
+    def _obs(self) -> Any:
+        if self.observations is not None:
+            return self.observations
+        if self._file is None or self._pid != os.getpid():
+            self._file = h5py.File(self.path, "r")  # lazily, in the process that reads
+            self._pid = os.getpid()
+        return self._file["observations"]
+
+    def _rows(self, items: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``s`` and ``s'`` arrays for transition numbers ``items``, one sorted read each."""
+        rows = self.obs_t[items]
+        wanted = np.concatenate([rows, rows + 1])
+        obs = self._obs()
+        block = obs[wanted] if isinstance(obs, np.ndarray) else read_rows(obs, wanted)
+        return block[: len(rows)], block[len(rows) :]
+
+    def _items(self, idx: list[int]) -> list[tuple[torch.Tensor, ...]]:
+        items = np.asarray(idx, dtype=np.int64)
+        if np.any(items < -len(self)) or np.any(items >= len(self)):
+            raise IndexError(f"transition index out of range for {len(self)} items")
+        items %= len(self)
+        if self.indices is not None:
+            items = self.indices[items]
+        s, s1 = self._rows(items)
+        out = []
+        for j, k in enumerate(items):
+            first, last = torch.from_numpy(s[j]), torch.from_numpy(s1[j])
+            if self.with_actions:
+                out.append((first, torch.tensor(int(self.actions[k])), last))
+            else:
+                out.append((first, last))
+        return out
+
+    def __getitem__(self, i: int) -> tuple[torch.Tensor, ...]:
+        return self._items([i])[0]
+
+    def __getitems__(self, idx: list[int]) -> list[tuple[torch.Tensor, ...]]:
+        """Batched fetch (used by ``DataLoader``): one sorted read per batch."""
+        return self._items(idx)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state["_file"], state["_pid"] = None, -1  # each worker opens its own handle
+        return state
+
+    def close(self) -> None:
+        """Close this process's handle, if open."""
+        if self._file is not None:
+            self._file.close()
+            self._file = None

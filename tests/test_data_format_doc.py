@@ -1,0 +1,111 @@
+"""docs/format.md matches the files: read generated files with plain h5py, per the document."""
+
+import json
+import re
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from data_testing import make_small
+
+from abco_data.format import REQUIRED_ROOT_ATTRS, space_from_json, space_to_json
+
+DOC = Path(__file__).resolve().parents[1] / "docs" / "format.md"
+
+
+def _table(heading: str) -> list[list[str]]:
+    """Body rows (cells) of the first table under the heading that starts with ``heading``."""
+    lines = DOC.read_text().split(heading, 1)[1].splitlines()
+    first = next(i for i, line in enumerate(lines) if line.startswith("|"))
+    table = []
+    for line in lines[first:]:
+        if not line.startswith("|"):
+            break
+        table.append([c.strip() for c in line.strip("|").split("|")])
+    return table[2:]  # header and separator rows
+
+
+def _name(cell: str) -> str:
+    return re.search(r"`([^`]+)`", cell).group(1)
+
+
+@pytest.fixture(scope="module", params=["abco/maze3x3-pre-v0", "abco/maze3x3-expert-v0",
+                                        "abco/mountaincar-pre-v0"])
+def path(request, tmp_path_factory):
+    return make_small(request.param, tmp_path_factory.mktemp("doc"))
+
+
+def test_root_attributes_as_documented(path):
+    documented = [_name(r[0]) for r in _table("### Root attributes")]
+    assert set(documented) >= set(REQUIRED_ROOT_ATTRS)
+    with h5py.File(path) as f:
+        assert set(f.attrs) == set(documented)
+        assert f.attrs["format"] == "abco-dataset" and f.attrs["format_version"] == 1
+        n_ep, n_tr = int(f.attrs["num_episodes"]), int(f.attrs["num_transitions"])
+        assert f.attrs["num_observations"] == n_ep + n_tr
+        for key in ("env_spec", "env_kwargs", "observation_space", "action_space",
+                    "creation_params", "overrides"):
+            json.loads(f.attrs[key])
+        space = space_from_json(f.attrs["observation_space"])
+        assert space_to_json(space) == f.attrs["observation_space"]
+
+
+def test_columns_as_documented(path):
+    with h5py.File(path) as f:
+        kind = f.attrs["kind"]
+        maze = f.attrs["env_id"].startswith("AbcoMaze")
+        n_ep, n_tr = int(f.attrs["num_episodes"]), int(f.attrs["num_transitions"])
+        sizes = {"(N + E,": n_tr + n_ep, "(N,)": n_tr, "(E,)": n_ep, "(E, n, n)": n_ep}
+        tables = (_table("### Flat columns") + _table("### Per-episode columns"))
+        for row in tables:
+            name, shape, note = _name(row[0]), row[1], " ".join(row[2:])
+            if "pre_demonstrations` only" in note and kind != "pre_demonstrations":
+                assert name not in f
+                continue
+            if "`expert` only" in note and kind != "expert":
+                assert name not in f
+                continue
+            if note.split("|")[-1].strip().startswith("mazes") or "mazes:" in note:
+                assert (name in f) == maze, name
+                if not maze:
+                    continue
+            assert name in f, name
+            rows = next(v for k, v in sizes.items() if shape.strip("`").startswith(k))
+            assert f[name].shape[0] == rows, name
+        for row in _table("### Reference returns"):
+            assert (_name(row[0]) in f) == maze
+
+
+def test_transitions_per_the_document(path):
+    """Rebuild every transition from the offsets alone and check the documented invariants."""
+    with h5py.File(path) as f:
+        obs = f["observations"][()]
+        off = f["episodes/obs_offset"][()]
+        toff = f["episodes/transition_offset"][()]
+        length = f["episodes/length"][()]
+        term, trunc = f["terminations"][()], f["truncations"][()]
+        rewards = f["rewards"][()]
+        np.testing.assert_array_equal(off, toff + np.arange(len(off)))
+        for e in range(len(off)):
+            t = slice(toff[e], toff[e] + length[e])
+            assert (term[t] | trunc[t])[-1] and not (term[t] | trunc[t])[:-1].any()
+            assert rewards[t].sum() == pytest.approx(f["episodes/return"][e])
+            s, s1 = obs[off[e] : off[e] + length[e]], obs[off[e] + 1 : off[e] + length[e] + 1]
+            assert len(s) == len(s1) == length[e]
+        if "positions" in f:
+            from abco_envs.maze.render import MazeRenderer
+
+            layout, pos = f["episodes/layout"][0], f["positions"][off[0]]
+            frame = MazeRenderer(layout.shape[0], 64, 64).frame(layout, *pos)
+            np.testing.assert_array_equal(frame, obs[off[0]])
+
+
+def test_storage_as_documented(path):
+    with h5py.File(path) as f:
+        obs = f["observations"]
+        assert obs.compression == "gzip" and obs.compression_opts == 6
+        if obs.ndim == 4:
+            assert obs.chunks[0] == 32
+        assert obs.maxshape[0] is None
+        assert list(f.attrs) == sorted(f.attrs)

@@ -1,0 +1,46 @@
+"""The registry of the twelve dataset ids."""
+
+import pytest
+
+import abco_data
+from abco_data.errors import UnknownDatasetError
+
+
+def test_twelve_ids_two_kinds_per_env():
+    assert len(abco_data.DATASET_IDS) == 12
+    assert len(set(abco_data.DATASET_IDS)) == 12
+    for env_id in ("AbcoMaze3x3-v0", "AbcoMaze5x5-v0", "AbcoMaze10x10-v0", "CartPole-v1",
+                   "Acrobot-v1", "MountainCar-v0"):
+        for kind in ("expert", "pre_demonstrations"):
+            s = abco_data.spec(abco_data.dataset_id(env_id, kind))
+            assert (s.env_id, s.kind) == (env_id, kind)
+
+
+def test_id_spelling():
+    assert abco_data.dataset_id("AbcoMaze5x5-v0", "expert") == "abco/maze5x5-expert-v0"
+    assert abco_data.dataset_id("abco_envs:AbcoMaze5x5-v0", "pre") == "abco/maze5x5-pre-v0"
+    assert abco_data.spec("abco/cartpole-pre-v0").filename == "cartpole-pre-v0.hdf5"
+
+
+def test_seeds_are_distinct():
+    seeds = [abco_data.spec(i).params["seed"] for i in abco_data.DATASET_IDS]
+    assert len(set(seeds)) == 12
+
+
+def test_unknown_id_lists_known_ones():
+    with pytest.raises(UnknownDatasetError) as err:
+        abco_data.spec("abco/maze7x7-expert-v0")
+    assert "abco/maze7x7-expert-v0" in str(err.value)
+    assert "abco/maze5x5-expert-v0" in str(err.value)
+    with pytest.raises(UnknownDatasetError):
+        abco_data.dataset_id("Pendulum-v1", "expert")
+    with pytest.raises(ValueError):
+        abco_data.dataset_id("CartPole-v1", "posterior")
+
+
+def test_overrides_are_checked():
+    s = abco_data.spec("abco/maze3x3-pre-v0")
+    assert s.with_overrides(layouts=3).params["layouts"] == 3
+    assert s.params["layouts"] == 100  # the registry's spec is untouched
+    with pytest.raises(TypeError, match="episodes_per_layut"):
+        s.with_overrides(episodes_per_layut=3)

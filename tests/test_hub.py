@@ -1,0 +1,538 @@
+"""Getting a dataset (abco_data.hub) against a local server speaking the Hub's file endpoints.
+
+Every test runs with a fresh :class:`hub_server.HubServer` on 127.0.0.1, a temporary
+``HF_HOME`` (huggingface_hub cache), ``ABCO_DATA_HOME`` (abco cache) and ``ABCO_DATA_MANIFEST``
+(a manifest written for the test). ``abco_data.hub`` reads ``HF_ENDPOINT``/``HF_HOME``/
+``HF_HUB_OFFLINE`` when called and passes ``endpoint=``/``cache_dir=`` to
+``huggingface_hub.hf_hub_download``, so setting them with monkeypatch is enough; one test also
+runs a subprocess with ``HF_ENDPOINT`` set before anything is imported, as a user would.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import logging
+import os
+import socket
+import subprocess
+import sys
+import textwrap
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+from hub_server import HubServer
+
+import abco_data
+from abco_data import hub
+from abco_data.errors import (
+    ChecksumError,
+    DatasetNotAvailableError,
+    UnknownDatasetError,
+)
+
+REPO = "abco-datasets/abco"
+DATASET = "abco/maze3x3-expert-v0"
+FILENAME = "maze3x3-expert-v0.hdf5"
+OTHER = "abco/cartpole-pre-v0"
+
+
+@dataclass
+class HubEnv:
+    """What a test gets: the server, the published bytes, and the folders in use."""
+
+    server: HubServer
+    data: bytes
+    commit: str
+    manifest: Path
+    abco_cache: Path
+    hf_cache: Path
+
+    def write_manifest(self, files: dict[str, dict[str, Any]] | None = None, **top: Any) -> None:
+        """Rewrite the test manifest (default: DATASET -> the published bytes)."""
+        if files is None:
+            files = {DATASET: entry_for(FILENAME, self.data)}
+        payload = {"revision": self.commit, "repo_id": REPO, "files": files, **top}
+        self.manifest.write_text(json.dumps(payload))
+
+    def file_requests(self) -> list[str]:
+        """'METHOD path' of the requests for files (resolve endpoint) the server received."""
+        return [f"{r.method} {r.path}" for r in self.server.requests if "/resolve/" in r.path]
+
+    def abco_files(self) -> list[str]:
+        """Every name in the abco cache folder, hidden temporary files included."""
+        return sorted(os.listdir(self.abco_cache)) if self.abco_cache.exists() else []
+
+    def hf_leftovers(self) -> list[Path]:
+        """Partial downloads left in the huggingface_hub cache."""
+        return sorted(self.hf_cache.rglob("*.incomplete"))
+
+
+def entry_for(filename: str, data: bytes) -> dict[str, Any]:
+    return {"filename": filename, "size": len(data), "sha256": hashlib.sha256(data).hexdigest()}
+
+
+class _NoSleepTime:
+    """Stands in for the ``time`` module inside huggingface_hub: retries without waiting."""
+
+    def __init__(self) -> None:
+        import time
+
+        self._time = time
+        self.sleeps: list[float] = []
+
+    def sleep(self, seconds: float) -> None:
+        self.sleeps.append(seconds)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._time, name)
+
+
+@pytest.fixture
+def no_sleep(monkeypatch: pytest.MonkeyPatch) -> _NoSleepTime:
+    """huggingface_hub's retry back-off (1 s, 2 s, ...) without the waiting."""
+    import huggingface_hub.file_download as file_download
+    import huggingface_hub.utils._http as http
+
+    fake = _NoSleepTime()
+    monkeypatch.setattr(file_download, "time", fake)
+    monkeypatch.setattr(http, "time", fake)
+    return fake
+
+
+@pytest.fixture
+def hub_env(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, no_sleep: _NoSleepTime
+) -> Any:
+    """A running local Hub with DATASET published, and the environment pointing at it."""
+    import huggingface_hub.constants as constants
+
+    data = os.urandom(300_000)
+    with HubServer() as server:
+        commit = server.publish(REPO, {FILENAME: data, "README.md": b"# abco\n"})
+        env = HubEnv(
+            server=server,
+            data=data,
+            commit=commit,
+            manifest=tmp_path / "manifest.json",
+            abco_cache=tmp_path / "abco",
+            hf_cache=tmp_path / "hf" / "hub",
+        )
+        env.write_manifest()
+        for name in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE", "HF_HUB_CACHE",
+                     "HUGGINGFACE_HUB_CACHE", "HF_TOKEN"):
+            monkeypatch.delenv(name, raising=False)
+        monkeypatch.setenv("HF_ENDPOINT", server.url)
+        monkeypatch.setenv("HF_HOME", str(tmp_path / "hf"))
+        monkeypatch.setenv("ABCO_DATA_HOME", str(env.abco_cache))
+        monkeypatch.setenv("ABCO_DATA_MANIFEST", str(env.manifest))
+        # huggingface_hub read HF_HUB_OFFLINE when it was imported: make sure it is off here.
+        monkeypatch.setattr(constants, "HF_HUB_OFFLINE", False)
+        # Small read chunks so that a download interrupted mid-body has data to resume from.
+        monkeypatch.setattr(constants, "DOWNLOAD_CHUNK_SIZE", 64 * 1024)
+        # huggingface_hub asks {ENDPOINT}/api/agent-harnesses once a day for its user agent;
+        # give it an empty registry so no test talks to the real Hub.
+        import huggingface_hub.utils._detect_agent as detect_agent
+
+        monkeypatch.setattr(detect_agent, "_registry", {}, raising=False)
+        yield env
+
+
+def fake_generator(data: bytes, calls: list[tuple[str, Path]] | None = None) -> Any:
+    """A stand-in for abco_data.generate that writes ``data`` (atomically, like the real one)."""
+
+    def generate(dataset_id: str, path: Any = None, *, progress: bool = True, **kw: Any) -> Path:
+        target = Path(path)
+        if calls is not None:
+            calls.append((dataset_id, target))
+        tmp = target.with_name(target.name + ".part")
+        tmp.write_bytes(data)
+        os.replace(tmp, target)
+        return target
+
+    return generate
+
+
+# --------------------------------------------------------------------------- downloading
+
+
+def test_download_verifies_and_caches(hub_env: HubEnv) -> None:
+    path = hub.download(DATASET, progress=False)
+    assert path == hub_env.abco_cache / FILENAME
+    assert path.read_bytes() == hub_env.data
+    assert hub_env.abco_files() == [FILENAME]
+    # The pinned commit is what was asked for, with a HEAD for metadata then a GET.
+    resolve = f"/datasets/{REPO}/resolve/{hub_env.commit}/{FILENAME}"
+    assert hub_env.file_requests() == [f"HEAD {resolve}", f"GET {resolve}"]
+    # The huggingface_hub cache keeps its copy too (used offline later).
+    assert list(hub_env.hf_cache.glob(f"datasets--abco-datasets--abco/snapshots/*/{FILENAME}"))
+
+
+def test_load_opens_the_fetched_file(hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch) -> None:
+    opened: list[Path] = []
+    monkeypatch.setattr(abco_data, "open_dataset", lambda p: opened.append(Path(p)) or "dataset")
+    assert hub.load(DATASET, progress=False) == "dataset"
+    assert opened == [hub_env.abco_cache / FILENAME]
+    assert opened[0].read_bytes() == hub_env.data
+
+
+def test_second_fetch_is_served_from_cache_without_network(hub_env: HubEnv) -> None:
+    first = hub.fetch(DATASET, progress=False)
+    hub_env.server.reset_requests()
+    second = hub.fetch(DATASET, progress=False)
+    assert second == first
+    assert hub_env.server.requests == []
+
+
+def test_progress_false_passes_a_silent_bar(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import huggingface_hub
+
+    seen: list[Any] = []
+    real = huggingface_hub.hf_hub_download
+
+    def spy(*args: Any, **kwargs: Any) -> Any:
+        seen.append(kwargs.get("tqdm_class"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(huggingface_hub, "hf_hub_download", spy)
+    hub.download(DATASET, progress=False)
+    assert seen and seen[0] is not None
+    bar = seen[0](total=10)
+    bar.update(5)  # a do-nothing bar: no output, no error
+    hub.download(DATASET, cache_dir=hub_env.abco_cache / "other", progress=True)
+    assert seen[-1] is None  # huggingface_hub's own bars
+
+
+def test_interrupted_download_resumes_and_ends_verified(hub_env: HubEnv) -> None:
+    hub_env.server.interrupt(FILENAME, after=150_000, times=1)
+    path = hub.download(DATASET, progress=False)
+    assert path.read_bytes() == hub_env.data
+    gets = [r for r in hub_env.server.requests if r.method == "GET" and "/resolve/" in r.path]
+    assert len(gets) == 2
+    assert "range" not in gets[0].headers
+    assert gets[1].headers["range"].startswith("bytes=")  # resumed, not restarted
+    assert int(gets[1].headers["range"][6:].rstrip("-")) > 0
+    assert hub_env.abco_files() == [FILENAME]
+    assert hub_env.hf_leftovers() == []
+
+
+def test_download_that_keeps_failing_leaves_nothing_then_succeeds(hub_env: HubEnv) -> None:
+    hub_env.server.interrupt(FILENAME, after=0, times=None)  # every GET dies before any byte
+    with pytest.raises(DatasetNotAvailableError, match=FILENAME) as info:
+        hub.download(DATASET, progress=False)
+    assert hub_env.server.url in str(info.value)
+    assert hub_env.abco_files() == []
+    assert hub_env.hf_leftovers() == []
+    assert not list(hub_env.hf_cache.rglob("blobs/*"))
+    hub_env.server.clear_faults()
+    path = hub.download(DATASET, progress=False)
+    assert path.read_bytes() == hub_env.data
+    assert hub_env.abco_files() == [FILENAME]
+
+
+def test_corrupted_file_on_the_hub_is_never_cached(hub_env: HubEnv) -> None:
+    bad = bytearray(hub_env.data)
+    bad[1234] ^= 0xFF
+    hub_env.server.set_file(REPO, hub_env.commit, FILENAME, bytes(bad))
+    with pytest.raises(ChecksumError) as info:
+        hub.download(DATASET, progress=False)
+    message = str(info.value)
+    assert hashlib.sha256(hub_env.data).hexdigest() in message
+    assert hashlib.sha256(bytes(bad)).hexdigest() in message
+    assert str(hub_env.hf_cache) in message  # names the downloaded file
+    assert hub_env.abco_files() == []
+    # The bad copy is not kept in the huggingface_hub cache either, so a retry downloads again.
+    assert not [p for p in hub_env.hf_cache.rglob(FILENAME) if p.exists()]
+    assert not list(hub_env.hf_cache.rglob("blobs/*"))
+
+
+def test_corrupted_file_on_the_hub_falls_back_to_generation(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    hub_env.server.set_file(REPO, hub_env.commit, FILENAME, b"x" * len(hub_env.data))
+    calls: list[tuple[str, Path]] = []
+    monkeypatch.setattr(abco_data, "generate", fake_generator(hub_env.data, calls), raising=False)
+    with caplog.at_level(logging.WARNING, logger="abco_data.hub"):
+        path = hub.fetch(DATASET, progress=False)
+    assert [c[0] for c in calls] == [DATASET]
+    assert path.read_bytes() == hub_env.data
+    assert "does not match the manifest" in caplog.text
+    assert "generating" in caplog.text
+    assert hub_env.abco_files() == [FILENAME]
+
+
+@pytest.mark.parametrize("in_place", [False, True], ids=["rewritten", "in-place"])
+def test_corrupted_cached_file_is_reported_and_replaced(
+    hub_env: HubEnv, caplog: pytest.LogCaptureFixture, in_place: bool
+) -> None:
+    path = hub.fetch(DATASET, progress=False)
+    bad = bytearray(path.read_bytes())
+    bad[-1] ^= 0x01
+    if in_place:
+        # Damage the file itself: the abco copy may be a hard link to huggingface_hub's blob,
+        # which is then bad too and must be downloaded again.
+        with open(path, "r+b") as handle:
+            handle.write(bytes(bad))
+    else:
+        path.unlink()
+        path.write_bytes(bytes(bad))
+    with caplog.at_level(logging.WARNING, logger="abco_data.hub"):
+        again = hub.fetch(DATASET, progress=False)
+    assert again == path
+    assert again.read_bytes() == hub_env.data
+    assert str(path) in caplog.text
+    assert hashlib.sha256(bytes(bad)).hexdigest() in caplog.text
+    assert hashlib.sha256(hub_env.data).hexdigest() in caplog.text
+    assert hub_env.abco_files() == [FILENAME]
+
+
+def test_bad_copy_in_hf_cache_is_fetched_again(hub_env: HubEnv) -> None:
+    hub.download(DATASET, progress=False)
+    (hub_env.abco_cache / FILENAME).unlink()
+    blob = next(hub_env.hf_cache.rglob("blobs/*"))
+    blob.write_bytes(b"\0" * len(hub_env.data))  # also corrupts nothing else: no abco copy
+    hub_env.server.reset_requests()
+    path = hub.download(DATASET, progress=False)
+    assert path.read_bytes() == hub_env.data
+    assert any(r.startswith("GET ") for r in hub_env.file_requests())
+
+
+def test_file_missing_on_the_hub_falls_back_to_generation(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    hub_env.write_manifest(files={OTHER: entry_for("cartpole-pre-v0.hdf5", b"other bytes")})
+    with pytest.raises(DatasetNotAvailableError, match="cartpole-pre-v0.hdf5"):
+        hub.download(OTHER, progress=False)
+    monkeypatch.setattr(abco_data, "generate", fake_generator(b"other bytes"), raising=False)
+    path = hub.fetch(OTHER, progress=False)
+    assert path.read_bytes() == b"other bytes"
+
+
+def test_unreachable_hub_falls_back_to_generation(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch, no_sleep: _NoSleepTime
+) -> None:
+    with socket.socket() as probe:  # a port nothing listens on
+        probe.bind(("127.0.0.1", 0))
+        dead = f"http://127.0.0.1:{probe.getsockname()[1]}"
+    monkeypatch.setenv("HF_ENDPOINT", dead)
+    with pytest.raises(DatasetNotAvailableError, match="127.0.0.1"):
+        hub.download(DATASET, progress=False)
+    monkeypatch.setattr(abco_data, "generate", fake_generator(hub_env.data), raising=False)
+    assert hub.fetch(DATASET, progress=False).read_bytes() == hub_env.data
+    assert hub_env.server.requests == []
+
+
+# --------------------------------------------------------------------------- offline
+
+
+def test_offline_serves_the_abco_cache(hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = hub.fetch(DATASET, progress=False)
+    hub_env.server.reset_requests()
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    assert hub.fetch(DATASET, progress=False) == path
+    assert hub_env.server.requests == []
+
+
+def test_offline_serves_the_huggingface_hub_cache(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    hub.download(DATASET, progress=False)
+    (hub_env.abco_cache / FILENAME).unlink()
+    hub_env.server.reset_requests()
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    monkeypatch.setattr(abco_data, "generate", fake_generator(b"must not be used"), raising=False)
+    path = hub.fetch(DATASET, progress=False)
+    assert path.read_bytes() == hub_env.data
+    assert hub_env.server.requests == []
+
+
+def test_offline_with_nothing_generates(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls: list[tuple[str, Path]] = []
+    monkeypatch.setattr(abco_data, "generate", fake_generator(hub_env.data, calls), raising=False)
+    path = hub.fetch(DATASET, offline=True, progress=False)
+    assert path.read_bytes() == hub_env.data
+    # Generated under a hidden temporary name in the cache folder, then renamed.
+    assert calls[0][1].parent == hub_env.abco_cache
+    assert calls[0][1].name.startswith(".")
+    assert hub_env.abco_files() == [FILENAME]
+    assert hub_env.server.requests == []
+
+
+def test_generated_file_that_differs_raises_checksum_error(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(abco_data, "generate", fake_generator(b"not it"), raising=False)
+    with pytest.raises(ChecksumError, match="locally generated file"):
+        hub.fetch(DATASET, offline=True, progress=False)
+    assert hub_env.abco_files() == []
+
+
+def test_dataset_missing_from_manifest_is_generated_and_logged(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    hub_env.write_manifest(files={})
+    monkeypatch.setattr(abco_data, "generate", fake_generator(b"fresh"), raising=False)
+    with caplog.at_level(logging.INFO, logger="abco_data.hub"):
+        path = hub.fetch(DATASET, progress=False)
+    assert path.read_bytes() == b"fresh"
+    assert "no entry for abco/maze3x3-expert-v0" in caplog.text
+    assert hub_env.server.requests == []
+    with pytest.raises(DatasetNotAvailableError, match="no entry"):
+        hub.download(DATASET, progress=False)
+
+
+# --------------------------------------------------------------------------- ids, manifest
+
+
+def test_unknown_id_lists_the_known_ones(hub_env: HubEnv) -> None:
+    with pytest.raises(UnknownDatasetError) as info:
+        hub.load("abco/maze4x4-expert-v0", progress=False)
+    assert "abco/maze4x4-expert-v0" in str(info.value)
+    for known in abco_data.DATASET_IDS:
+        assert known in str(info.value)
+    with pytest.raises(UnknownDatasetError):
+        hub.cached_path("nope")
+
+
+def test_cached_path_follows_abco_data_home(hub_env: HubEnv) -> None:
+    assert hub.cached_path(DATASET) == hub_env.abco_cache / FILENAME
+    assert hub.cached_path(DATASET, "/x") == Path("/x") / FILENAME
+
+
+def test_invalid_manifest_is_a_clear_error(hub_env: HubEnv) -> None:
+    hub_env.manifest.write_text(json.dumps({"revision": "a", "files": {DATASET: {"size": 1}}}))
+    with pytest.raises(abco_data.DatasetError, match=str(hub_env.manifest)):
+        hub.fetch(DATASET, progress=False)
+
+
+def test_shipped_manifest_is_valid() -> None:
+    manifest = hub.read_manifest(Path(hub.__file__).with_name("manifest.json"))
+    assert manifest.repo_id == REPO
+    for dataset_id in manifest.files:
+        assert dataset_id in abco_data.DATASET_IDS
+
+
+def test_subprocess_with_hf_endpoint_set_before_import(hub_env: HubEnv) -> None:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST")}
+    code = textwrap.dedent(
+        f"""
+        import huggingface_hub.constants as c
+        assert c.ENDPOINT == {hub_env.server.url!r}, c.ENDPOINT
+        from abco_data import hub
+        path = hub.download({DATASET!r}, progress=False)
+        print(path)
+        """
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code],
+        env=env,
+        cwd=Path(__file__).resolve().parents[1],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stderr
+    assert Path(done.stdout.strip().splitlines()[-1]).read_bytes() == hub_env.data
+
+
+# --------------------------------------------------------------------------- push
+
+
+def _tiny_hdf5(path: Path, dataset_id: str, env_id: str) -> Path:
+    h5py = pytest.importorskip("h5py")
+    import numpy as np
+
+    with h5py.File(path, "w") as handle:
+        handle.attrs.update(
+            {
+                "format": "abco-dataset",
+                "format_version": 1,
+                "dataset_id": dataset_id,
+                "kind": "expert",
+                "env_id": env_id,
+                "num_episodes": 1,
+                "creation_params": json.dumps({"seed": 0}),
+            }
+        )
+        handle.create_dataset("observations", data=np.zeros((2, 4), dtype=np.float32))
+    return path
+
+
+def test_push_commits_file_and_card_to_the_local_hub(hub_env: HubEnv, tmp_path: Path) -> None:
+    hub_env.write_manifest(files={})
+    repo = "maintainer/abco-test"
+    first = _tiny_hdf5(tmp_path / "a.hdf5", DATASET, "AbcoMaze3x3-v0")
+    commit = hub.push(DATASET, repo, path=first, token="hf_test")
+    assert len(commit) == 40
+    files = hub_env.server.files(repo, commit)
+    assert files[FILENAME] == first.read_bytes()
+    card = files["README.md"].decode()
+    assert card.startswith("---\nlicense: mit\n")
+    assert "task_categories:\n- reinforcement-learning" in card
+    assert "- AbcoMaze3x3-v0" in card
+    assert f"## `{DATASET}`" in card
+    assert hashlib.sha256(first.read_bytes()).hexdigest() in card
+    assert f"File `{FILENAME}`" in card
+    posts = [r.path for r in hub_env.server.requests if r.method == "POST"]
+    assert f"/api/datasets/{repo}/commit/main" in posts
+    assert all(r.headers.get("authorization") == "Bearer hf_test" for r in hub_env.server.requests
+               if r.method == "POST")
+
+    second = _tiny_hdf5(tmp_path / "b.hdf5", OTHER, "CartPole-v1")
+    commit2 = hub.push(OTHER, repo, path=second, token="hf_test")
+    card2 = hub_env.server.files(repo, commit2)["README.md"].decode()
+    assert f"## `{DATASET}`" in card2 and f"## `{OTHER}`" in card2  # sections accumulate
+    assert "- AbcoMaze3x3-v0" in card2 and "- CartPole-v1" in card2
+
+    # What was pushed downloads and verifies against a manifest pinned to the new commit.
+    hub_env.commit = commit2
+    hub_env.write_manifest(files={DATASET: entry_for(FILENAME, first.read_bytes())}, repo_id=repo)
+    assert hub.download(DATASET, progress=False).read_bytes() == first.read_bytes()
+
+
+def test_push_refuses_a_file_that_differs_from_the_manifest(
+    hub_env: HubEnv, tmp_path: Path
+) -> None:
+    wrong = tmp_path / "wrong.hdf5"
+    wrong.write_bytes(b"wrong")
+    with pytest.raises(ChecksumError, match="file to push"):
+        hub.push(DATASET, "maintainer/abco-test", path=wrong, token="hf_test")
+    assert [r for r in hub_env.server.requests if r.method == "POST"] == []
+
+
+# --------------------------------------------------------------------------- real generator
+
+
+def test_load_end_to_end_with_the_real_generator(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """Publish a tiny real dataset, load it from the Hub, then regenerate it offline."""
+    pytest.importorskip("abco_envs.experts.classic")
+    overrides = {"layouts": 2, "episodes_per_layout": 2, "reference_episodes": 2}
+    dataset_id, filename = "abco/maze3x3-pre-v0", "maze3x3-pre-v0.hdf5"
+    published = abco_data.generate(dataset_id, tmp_path / filename, progress=False, **overrides)
+    data = published.read_bytes()
+    hub_env.commit = hub_env.server.publish(REPO, {filename: data})
+    hub_env.write_manifest(files={dataset_id: entry_for(filename, data)})
+
+    dataset = hub.load(dataset_id, progress=False)
+    assert dataset.id == dataset_id
+    assert Path(dataset.path) == hub_env.abco_cache / filename
+
+    # Offline with empty caches: the generator (same overrides) rebuilds the same bytes.
+    (hub_env.abco_cache / filename).unlink()
+    monkeypatch.setenv("HF_HOME", str(tmp_path / "empty-hf"))
+    monkeypatch.setattr(
+        abco_data, "generate", functools.partial(abco_data.generate, **overrides)
+    )
+    hub_env.server.reset_requests()
+    regenerated = hub.load(dataset_id, offline=True, progress=False)
+    assert Path(regenerated.path).read_bytes() == data
+    assert hub_env.server.requests == []
