@@ -26,7 +26,8 @@ from abco_data.errors import (
 )
 from abco_data.format import FORMAT_NAME, FORMAT_VERSION
 from abco_data.generate import GENERATOR_VERSION, data_home, generate
-from abco_data.hub import download, load, push
+from abco_data.hub import download, load
+from abco_data.publish import push
 from abco_data.reference import ReferenceReturns
 from abco_data.registry import DATASET_IDS, DatasetSpec, dataset_id, spec
 from abco_data.verify import VerifyReport, sha256_of, verify

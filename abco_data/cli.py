@@ -136,7 +136,7 @@ def _cmd_verify(args: argparse.Namespace) -> int:
 
 
 def _cmd_push(args: argparse.Namespace) -> int:
-    from abco_data.hub import push
+    from abco_data.publish import push
 
     commit = push(args.id, args.repo, path=args.path, revision=args.revision)
     print(f"pushed {args.id} to {args.repo} at {commit}")

@@ -27,7 +27,7 @@ import pytest
 from hub_server import HubServer
 
 import abco_data
-from abco_data import hub
+from abco_data import hub, publish
 from abco_data.errors import (
     ChecksumError,
     DatasetNotAvailableError,
@@ -469,7 +469,7 @@ def test_push_commits_file_and_card_to_the_local_hub(hub_env: HubEnv, tmp_path: 
     hub_env.write_manifest(files={})
     repo = "maintainer/abco-test"
     first = _tiny_hdf5(tmp_path / "a.hdf5", DATASET, "AbcoMaze3x3-v0")
-    commit = hub.push(DATASET, repo, path=first, token="hf_test")
+    commit = publish.push(DATASET, repo, path=first, token="hf_test")
     assert len(commit) == 40
     files = hub_env.server.files(repo, commit)
     assert files[FILENAME] == first.read_bytes()
@@ -486,7 +486,7 @@ def test_push_commits_file_and_card_to_the_local_hub(hub_env: HubEnv, tmp_path: 
                if r.method == "POST")
 
     second = _tiny_hdf5(tmp_path / "b.hdf5", OTHER, "CartPole-v1")
-    commit2 = hub.push(OTHER, repo, path=second, token="hf_test")
+    commit2 = publish.push(OTHER, repo, path=second, token="hf_test")
     card2 = hub_env.server.files(repo, commit2)["README.md"].decode()
     assert f"## `{DATASET}`" in card2 and f"## `{OTHER}`" in card2  # sections accumulate
     assert "- AbcoMaze3x3-v0" in card2 and "- CartPole-v1" in card2
@@ -503,7 +503,7 @@ def test_push_refuses_a_file_that_differs_from_the_manifest(
     wrong = tmp_path / "wrong.hdf5"
     wrong.write_bytes(b"wrong")
     with pytest.raises(ChecksumError, match="file to push"):
-        hub.push(DATASET, "maintainer/abco-test", path=wrong, token="hf_test")
+        publish.push(DATASET, "maintainer/abco-test", path=wrong, token="hf_test")
     assert [r for r in hub_env.server.requests if r.method == "POST"] == []
 
 
