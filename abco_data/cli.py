@@ -71,6 +71,9 @@ def _cmd_info(args: argparse.Namespace) -> int:
         print(f"file:        {path}\ndataset id:  {ds.id}")
         print(f"episodes:    {ds.num_episodes}\ntransitions: {ds.num_transitions}")
         print(f"observation: {ds.observation_space}\naction:      {ds.action_space}")
+        palette = ds.observation_palette
+        print(f"storage:     observations {ds.attrs['observation_encoding']}"
+              + (f" ({len(palette)} colours)" if palette is not None else ""))
         print(f"reference:   expert {ref.expert_mean:.4f}, random {ref.random_mean:.4f}"
               + (f" ({len(ref.layout_ids)} layouts)" if ref.layout_ids else ""))
         ds.close()

@@ -18,7 +18,13 @@ import numpy as np
 from gymnasium import spaces
 
 from abco_data.errors import CorruptDatasetError, WrongKindError
-from abco_data.format import check_header, open_h5, read_column, read_rows, space_from_json
+from abco_data.format import (
+    ObservationReader,
+    check_header,
+    open_h5,
+    read_column,
+    space_from_json,
+)
 from abco_data.reference import ReferenceReturns
 
 __all__ = ["Dataset", "Episode", "DatasetArrays", "open_dataset"]
@@ -131,6 +137,7 @@ class Dataset:
     reference: ReferenceReturns
     _index: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
     _handle: dict[int, h5py.File] = field(default_factory=dict, repr=False)
+    _readers: dict[int, ObservationReader] = field(default_factory=dict, repr=False)
 
     # -- file access -------------------------------------------------------------------------
 
@@ -142,15 +149,24 @@ class Dataset:
             self._handle[pid] = h5py.File(self.path, "r")
         return self._handle[pid]
 
+    def _observations(self) -> ObservationReader:
+        """The observations column of this process's handle (palette decoded on read)."""
+        f, pid = self._file(), os.getpid()
+        if pid not in self._readers:
+            self._readers.clear()
+            self._readers[pid] = ObservationReader(f)
+        return self._readers[pid]
+
     def close(self) -> None:
         """Close the file handle (it reopens on the next read)."""
+        self._readers.clear()
         for f in self._handle.values():
             f.close()
         self._handle.clear()
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(vars(self))
-        state["_handle"] = {}
+        state["_handle"], state["_readers"] = {}, {}
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -161,6 +177,11 @@ class Dataset:
     def is_maze(self) -> bool:
         """Whether episodes carry maze layouts and positions."""
         return "positions" in self._file()
+
+    @property
+    def observation_palette(self) -> np.ndarray | None:
+        """The ``(K, 3)`` palette of palette-encoded observations, else None."""
+        return self._observations().palette
 
     @property
     def action_column(self) -> str:
@@ -190,7 +211,7 @@ class Dataset:
         o, t, n = (int(idx[k][i]) for k in ("obs_offset", "transition_offset", "length"))
         maze = "positions" in f
         return Episode(
-            index=i, seed=int(idx["seed"][i]), observations=f["observations"][o : o + n + 1],
+            index=i, seed=int(idx["seed"][i]), observations=self._read_obs(o, o + n + 1),
             actions=f["actions"][t : t + n] if self.kind == "pre_demonstrations" else None,
             rewards=f["rewards"][t : t + n], terminations=f["terminations"][t : t + n],
             truncations=f["truncations"][t : t + n], episode_return=float(idx["return"][i]),
@@ -198,6 +219,13 @@ class Dataset:
             layout_index=int(f["episodes/layout_index"][i]) if maze else None,
             positions=f["positions"][o : o + n + 1] if maze else None,
         )
+
+    def _read_obs(self, start: int, stop: int, out: np.ndarray | None = None) -> np.ndarray:
+        try:
+            return self._observations().read(start, stop, out)
+        except OSError as err:
+            raise CorruptDatasetError(f"{self.path}: observations cannot be read (corrupt or"
+                                      f" truncated data): {err}") from err
 
     def episodes(self) -> Iterator[Episode]:
         """Every episode, in order."""
@@ -207,11 +235,16 @@ class Dataset:
     # -- flat views ---------------------------------------------------------------------------
 
     def load_arrays(self) -> DatasetArrays:
-        """Every column in memory as numpy arrays (each read into one allocation)."""
+        """Every column in memory as numpy arrays (each read into one allocation).
+
+        Palette-encoded observations are decoded chunk by chunk into the one output array.
+        """
         f = self._file()
+        reader = self._observations()
         cols = {name: (_read(f[col], self.path) if col in f else None)
-                for name, col in _ARRAY_COLUMNS.items()}
-        return DatasetArrays(**cols)
+                for name, col in _ARRAY_COLUMNS.items() if name != "observations"}
+        obs = self._read_obs(0, len(reader), np.empty(reader.shape, dtype=reader.dtype))
+        return DatasetArrays(observations=obs, **cols)
 
     def transition_index(self) -> tuple[np.ndarray, np.ndarray]:
         """``(obs_t, obs_t1)``: rows of ``observations`` of each transition's ``s`` and ``s'``.
@@ -237,7 +270,7 @@ class Dataset:
         obs_t, _ = self.transition_index()
         rows = obs_t[items]
         try:
-            block = read_rows(self._file()["observations"], np.concatenate([rows, rows + 1]))
+            block = self._observations().rows(np.concatenate([rows, rows + 1]))
         except OSError as err:
             raise CorruptDatasetError(f"{self.path}: observations cannot be read: {err}") from err
         actions = None
@@ -367,6 +400,10 @@ def open_dataset(path: str | os.PathLike[str], *, dataset_id: str | None = None,
             _check_counts(f, attrs, path, action_col)
             reference = _reference(f, attrs)
             obs_space = space_from_json(attrs["observation_space"])
+            obs_shape = ObservationReader(f).shape[1:]
+            if obs_shape != obs_space.shape:
+                raise CorruptDatasetError(f"{path}: observations have shape {obs_shape},"
+                                          f" the observation space {obs_space.shape}")
             act_space = space_from_json(attrs["action_space"])
         except (KeyError, ValueError, TypeError, OSError) as err:
             if isinstance(err, (CorruptDatasetError, WrongKindError)):

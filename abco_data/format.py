@@ -2,7 +2,9 @@
 
 This module is the only place that knows the layout described in ``docs/format.md``: the
 names of the columns and attributes, the compression of each column, the JSON encoding of
-spaces, the atomic writer and the header checks a reader runs before trusting a file.
+spaces, the atomic writer and the header checks a reader runs before trusting a file. The
+palette encoding of image observations is in :mod:`abco_data.palette`; here the writer picks
+it and :class:`ObservationReader` decodes it.
 
 Example:
     >>> from gymnasium import spaces
@@ -27,6 +29,15 @@ import numpy as np
 from gymnasium import spaces
 
 from abco_data.errors import CorruptDatasetError, DatasetWriteError, FormatVersionError
+from abco_data.palette import (
+    MAX_COLOURS,
+    MAX_COLOURS_4BIT,
+    PaletteDecoder,
+    PaletteEncoder,
+    is_palette_candidate,
+    pack4,
+    unpack4,
+)
 
 __all__ = [
     "FORMAT_NAME",
@@ -42,6 +53,7 @@ __all__ = [
     "to_json",
     "read_column",
     "read_rows",
+    "ObservationReader",
 ]
 
 #: The ``format`` root attribute of every abco dataset file.
@@ -55,17 +67,26 @@ REQUIRED_ROOT_ATTRS = (
     "format", "format_version", "dataset_id", "kind", "env_id", "env_spec", "env_kwargs",
     "observation_space", "action_space", "generator", "generator_version", "seed",
     "num_episodes", "num_transitions", "num_observations", "creation_params",
-    "reference_expert_mean", "reference_random_mean",
+    "reference_expert_mean", "reference_random_mean", "observation_encoding",
 )
+#: Values of the ``observation_encoding`` root attribute.
+OBSERVATION_ENCODINGS = ("raw", "palette", "palette4")
 #: Flat columns every file carries (``actions`` or ``idm_eval_actions`` depends on the kind).
 FLAT_COLUMNS = ("observations", "rewards", "terminations", "truncations")
 #: Per-episode columns under the ``episodes`` group.
 EPISODE_COLUMNS = ("obs_offset", "transition_offset", "length", "seed", "return")
-#: Gzip level of every column (measured in docs/format.md: level 6 halves level 1's size).
+#: Gzip level of vector columns (small; level 6 halves level 1's size).
 GZIP_LEVEL = 6
-#: Frames per chunk of an image column; other columns use ``VECTOR_CHUNK_BYTES`` chunks.
-IMAGE_CHUNK_ROWS = 32
+#: Gzip level of image-like columns (rows of 2+ dimensions), measured in docs/format.md: on
+#: packed palette indices level 3 is 2.4x smaller than level 1, as fast to write, and
+#: inflates fastest; level 6 is a third smaller but writes twice as slowly.
+IMAGE_GZIP_LEVEL = 3
+#: Rows per chunk of an image-like column; other columns use ``VECTOR_CHUNK_BYTES`` chunks.
+IMAGE_CHUNK_ROWS = 64
 VECTOR_CHUNK_BYTES = 1 << 16
+#: The column stored palette-encoded when its frames allow it, and its palette.
+OBSERVATIONS = "observations"
+PALETTE = "observation_palette"
 
 
 def chunk_rows(row_shape: tuple[int, ...], dtype: Any) -> int:
@@ -73,7 +94,7 @@ def chunk_rows(row_shape: tuple[int, ...], dtype: Any) -> int:
 
     Example:
         >>> chunk_rows((64, 64, 3), "uint8"), chunk_rows((4,), "float32"), chunk_rows((), bool)
-        (32, 4096, 65536)
+        (64, 4096, 65536)
     """
     if len(row_shape) >= 2:
         return IMAGE_CHUNK_ROWS
@@ -135,35 +156,83 @@ def space_from_json(text: str) -> spaces.Space[Any]:
 
 
 class _Column:
-    """A resizable, chunked, gzip-compressed dataset written a whole chunk at a time."""
+    """A resizable, chunked, gzip-compressed dataset written a whole chunk at a time.
 
-    def __init__(self, group: h5py.Group, name: str, row_shape: tuple[int, ...], dtype: Any):
+    With ``palette`` (RGB ``uint8`` frames), rows are stored as palette indices (see
+    :mod:`abco_data.palette`): packed two per byte (``palette4``) while the frames have at
+    most 16 colours and an even width, one per byte (``palette``) up to 256 colours, raw
+    beyond; on a change the rows already written are rewritten in the new encoding.
+    """
+
+    def __init__(self, group: h5py.Group, name: str, row_shape: tuple[int, ...], dtype: Any,
+                 palette: bool = False):
+        self.group, self.name, self.row_shape = group, name, tuple(row_shape)
+        self.dtype = np.dtype(dtype)
         self.rows = chunk_rows(row_shape, dtype)
-        self.ds = group.create_dataset(
-            name, shape=(0, *row_shape), maxshape=(None, *row_shape), dtype=dtype,
-            chunks=(self.rows, *row_shape), compression="gzip", compression_opts=GZIP_LEVEL,
-            track_times=False,
-        )
+        self.encoder = PaletteEncoder() if palette else None
+        self.encoding = "raw"
+        if palette:
+            self.encoding = "palette4" if self.row_shape[1] % 2 == 0 else "palette"
+        self.ds = self._create()
         self.pending: list[np.ndarray] = []
         self.pending_rows = 0
         self.size = 0
 
+    def _create(self) -> h5py.Dataset:
+        shape = self.row_shape
+        if self.encoding == "palette":
+            shape = shape[:-1]
+        elif self.encoding == "palette4":
+            shape = (shape[0], shape[1] // 2)
+        level = IMAGE_GZIP_LEVEL if len(self.row_shape) >= 2 else GZIP_LEVEL
+        return self.group.create_dataset(
+            self.name, shape=(0, *shape), maxshape=(None, *shape), dtype=self.dtype,
+            chunks=(self.rows, *shape), compression="gzip", compression_opts=level,
+            track_times=False,
+        )
+
     def append(self, rows: np.ndarray) -> None:
         if len(rows):
-            self.pending.append(np.asarray(rows, dtype=self.ds.dtype))
+            self.pending.append(np.asarray(rows, dtype=self.dtype))
             self.pending_rows += len(rows)
         if self.pending_rows >= 8 * self.rows:
             self.flush(final=False)
+
+    def _store(self, block: np.ndarray) -> None:
+        if self.encoder is not None:
+            indices = self.encoder.encode(block)
+            if indices is None:
+                self._rewrite("raw")
+            else:
+                if self.encoding == "palette4" and len(self.encoder) > MAX_COLOURS_4BIT:
+                    self._rewrite("palette")
+                block = pack4(indices) if self.encoding == "palette4" else indices
+        start = self.size
+        self.ds.resize((start + len(block), *self.ds.shape[1:]))
+        self.ds[start:] = block
+        self.size += len(block)
+
+    def _rewrite(self, encoding: str) -> None:
+        """Rewrite the rows written so far in ``encoding`` (the palette outgrew the old one)."""
+        data = self.ds[: self.size]
+        if self.encoding == "palette4":
+            data = unpack4(data)
+        if encoding == "raw":
+            data = PaletteDecoder(self.encoder.palette).decode(data)
+            self.encoder = None
+        del self.group[self.name]
+        self.encoding = encoding
+        self.ds = self._create()
+        self.ds.resize((self.size, *self.ds.shape[1:]))
+        if self.size:
+            self.ds[:] = data
 
     def flush(self, final: bool) -> None:
         if not self.pending_rows:
             return
         block = np.concatenate(self.pending)
         keep = len(block) if final else len(block) - len(block) % self.rows
-        start = self.size
-        self.ds.resize((start + keep, *self.ds.shape[1:]))
-        self.ds[start : start + keep] = block[:keep]
-        self.size += keep
+        self._store(block[:keep])
         rest = block[keep:]
         self.pending, self.pending_rows = ([rest] if len(rest) else []), len(rest)
 
@@ -191,11 +260,94 @@ def read_rows(ds: h5py.Dataset, rows: np.ndarray) -> np.ndarray:
     return out
 
 
+class ObservationReader:
+    """Reads the ``observations`` column of an open file, decoding a palette transparently.
+
+    Args:
+        f: An open abco dataset file.
+
+    Raises:
+        CorruptDatasetError: An unknown ``observation_encoding`` or a malformed palette.
+    """
+
+    #: Chunks inflated (then decoded) per step of a long read.
+    BLOCK_CHUNKS = 4
+
+    def __init__(self, f: h5py.File) -> None:
+        self.ds = f[OBSERVATIONS]
+        self.encoding = _attr(f.attrs.get("observation_encoding", "raw"))
+        self.decoder: PaletteDecoder | None = None
+        if self.encoding in ("palette", "palette4"):
+            if PALETTE not in f:
+                raise CorruptDatasetError(f"{f.filename}: observation_encoding is"
+                                          f" {self.encoding!r} but the {PALETTE} dataset is"
+                                          " missing")
+            palette = f[PALETTE][()]
+            if (palette.dtype != np.uint8 or palette.ndim != 2 or palette.shape[1] != 3
+                    or len(palette) > MAX_COLOURS or self.ds.dtype != np.uint8):
+                raise CorruptDatasetError(
+                    f"{f.filename}: malformed {PALETTE} {palette.shape} {palette.dtype} for"
+                    f" observations of {self.ds.dtype}")
+            self.decoder = PaletteDecoder(palette, packed=self.encoding == "palette4")
+        elif self.encoding != "raw":
+            raise CorruptDatasetError(f"{f.filename}: unknown observation_encoding"
+                                      f" {self.encoding!r}; expected one of"
+                                      f" {OBSERVATION_ENCODINGS}")
+        self.shape = self.ds.shape if self.decoder is None else \
+            self.decoder.out_shape(self.ds.shape)
+        self.dtype = np.dtype(np.uint8) if self.decoder is not None else self.ds.dtype
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    @property
+    def palette(self) -> np.ndarray | None:
+        """The ``(K, 3)`` palette, or None for raw observations."""
+        return None if self.decoder is None else self.decoder.palette
+
+    def read(self, start: int = 0, stop: int | None = None,
+             out: np.ndarray | None = None) -> np.ndarray:
+        """Rows ``start:stop`` decoded, into ``out`` if given (a contiguous array)."""
+        stop = len(self) if stop is None else min(stop, len(self))
+        start = min(start, stop)
+        if out is None:
+            out = np.empty((stop - start, *self.shape[1:]), dtype=self.dtype)
+        if stop == start:
+            return out
+        if self.decoder is None:
+            self.ds.read_direct(out, np.s_[start:stop], np.s_[0 : stop - start])
+            return out
+        # A few chunks at a time into one small buffer, decoded straight into ``out``: the
+        # only memory beyond ``out`` is that buffer and the decoder's ~1 MB gather buffer.
+        step = self.BLOCK_CHUNKS * (self.ds.chunks[0] if self.ds.chunks else stop - start)
+        buf = np.empty((min(step, stop - start), *self.ds.shape[1:]), dtype=self.ds.dtype)
+        for a in range(start, stop, step):
+            b = min(a + step, stop)
+            self.ds.read_direct(buf, np.s_[a:b], np.s_[0 : b - a])
+            self.decoder.decode_into(buf[: b - a], out[a - start : b - start])
+        return out
+
+    def rows(self, rows: np.ndarray) -> np.ndarray:
+        """Rows ``rows`` (any order, repeats allowed) decoded; see :func:`read_rows`."""
+        block = read_rows(self.ds, rows)
+        return block if self.decoder is None else self.decoder.decode(block)
+
+    def __getitem__(self, key: slice) -> np.ndarray:
+        start, stop, stride = key.indices(len(self))
+        if stride != 1:
+            raise IndexError("observations: only contiguous slices are supported")
+        return self.read(start, stop)
+
+
 class DatasetWriter:
     """Writes one dataset file atomically: a temp file next to the target, then ``os.replace``.
 
     Use as a context manager. Columns are created on first append and grow in whole chunks,
-    so a column's bytes depend only on its contents. Nothing reaches ``path`` unless the block
+    so a column's bytes depend only on its contents. An ``observations`` column of RGB
+    ``uint8`` frames is stored palette-encoded (with an ``observation_palette`` dataset) while
+    its frames have at most 256 colours (indices packed two per byte up to 16 colours); the
+    root attribute ``observation_encoding`` says which (``"palette4"``, ``"palette"`` or
+    ``"raw"``). Nothing reaches ``path`` unless the block
     exits normally; on any error the temp file is removed and ``path`` is left untouched. A
     full disk (or any ``OSError``) surfaces as :class:`~abco_data.errors.DatasetWriteError`.
 
@@ -248,7 +400,8 @@ class DatasetWriter:
         rows = np.asarray(rows)
         if name not in self._columns:
             group, leaf = self._group(name)
-            self._columns[name] = _Column(group, leaf, rows.shape[1:], rows.dtype)
+            palette = name == OBSERVATIONS and is_palette_candidate(rows.shape[1:], rows.dtype)
+            self._columns[name] = _Column(group, leaf, rows.shape[1:], rows.dtype, palette)
         self._columns[name].append(rows)
 
     def write(self, name: str, data: np.ndarray) -> None:
@@ -264,6 +417,11 @@ class DatasetWriter:
             if exc_type is None:
                 for column in self._columns.values():
                     column.flush(final=True)
+                obs = self._columns.get(OBSERVATIONS)
+                if obs is not None:
+                    self.attrs["observation_encoding"] = obs.encoding
+                    if obs.encoding != "raw":
+                        self.write(PALETTE, obs.encoder.palette)
                 for key in sorted(self.attrs):
                     self.file.attrs[key] = self.attrs[key]
             self.file.close()
@@ -333,6 +491,14 @@ def check_header(f: h5py.File, path: str | os.PathLike[str]) -> dict[str, Any]:
     missing = [k for k in REQUIRED_ROOT_ATTRS if k not in attrs]
     if missing:
         raise CorruptDatasetError(f"{path}: missing root attribute(s) {', '.join(missing)}")
+    if attrs["observation_encoding"] not in OBSERVATION_ENCODINGS:
+        raise CorruptDatasetError(f"{path}: unknown observation_encoding"
+                                  f" {attrs['observation_encoding']!r}; expected one of"
+                                  f" {OBSERVATION_ENCODINGS}")
+    if attrs["observation_encoding"] != "raw" and PALETTE not in f:
+        raise CorruptDatasetError(f"{path}: observation_encoding is"
+                                  f" {attrs['observation_encoding']!r} but the {PALETTE}"
+                                  " dataset is missing")
     if attrs["kind"] not in KINDS:
         raise CorruptDatasetError(f"{path}: unknown kind {attrs['kind']!r}; expected {KINDS}")
     action_col = "actions" if attrs["kind"] == "pre_demonstrations" else "idm_eval_actions"

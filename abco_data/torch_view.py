@@ -31,7 +31,7 @@ import torch
 from torch.utils.data import Dataset as TorchDataset
 
 from abco_data.dataset import open_dataset
-from abco_data.format import read_rows
+from abco_data.format import ObservationReader
 
 __all__ = ["TransitionDataset"]
 
@@ -60,6 +60,7 @@ class TransitionDataset(TorchDataset):
         self.observations = ds.load_arrays().observations if in_memory else None
         ds.close()
         self._file: h5py.File | None = None
+        self._reader: ObservationReader | None = None
         self._pid = -1
 
     def __len__(self) -> int:
@@ -70,15 +71,16 @@ class TransitionDataset(TorchDataset):
             return self.observations
         if self._file is None or self._pid != os.getpid():
             self._file = h5py.File(self.path, "r")  # lazily, in the process that reads
+            self._reader = ObservationReader(self._file)  # decodes a palette on read
             self._pid = os.getpid()
-        return self._file["observations"]
+        return self._reader
 
     def _rows(self, items: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``s`` and ``s'`` arrays for transition numbers ``items``, one sorted read each."""
         rows = self.obs_t[items]
         wanted = np.concatenate([rows, rows + 1])
         obs = self._obs()
-        block = obs[wanted] if isinstance(obs, np.ndarray) else read_rows(obs, wanted)
+        block = obs[wanted] if isinstance(obs, np.ndarray) else obs.rows(wanted)
         return block[: len(rows)], block[len(rows) :]
 
     def _items(self, idx: list[int]) -> list[tuple[torch.Tensor, ...]]:
@@ -107,11 +109,12 @@ class TransitionDataset(TorchDataset):
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
-        state["_file"], state["_pid"] = None, -1  # each worker opens its own handle
+        state["_file"], state["_reader"], state["_pid"] = None, None, -1  # one per worker
         return state
 
     def close(self) -> None:
         """Close this process's handle, if open."""
         if self._file is not None:
+            self._reader = None
             self._file.close()
             self._file = None

@@ -1,15 +1,14 @@
 """Deep verification of a dataset file: every value read, every invariant checked.
 
 :func:`verify` goes further than :func:`~abco_data.dataset.open_dataset`: it decompresses
-every chunk, checks that only each episode's last transition ends it, that stored returns are
-the sums of the rewards, that observations lie in the observation space, re-renders every
-maze frame from its layout and agent position, and compares size and sha256 with expected
-values when given.
+every chunk, checks that palette indices name palette entries, that only each episode's last
+transition ends it, that stored returns are the sums of the rewards, that observations lie in
+the observation space, re-renders every maze frame from its layout and agent position, and
+compares size and sha256 with expected values when given.
 """
 
 from __future__ import annotations
 
-import hashlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +17,8 @@ import numpy as np
 
 from abco_data.dataset import DatasetArrays, open_dataset
 from abco_data.errors import ChecksumError, CorruptDatasetError
+from abco_data.manifest import file_digest
+from abco_data.palette import unpack4
 
 __all__ = ["VerifyReport", "verify", "sha256_of"]
 
@@ -45,13 +46,9 @@ class VerifyReport:
     frames_rendered: int
 
 
-def sha256_of(path: str | os.PathLike[str], block: int = 1 << 20) -> str:
-    """Hex sha256 of a file, read in ``block``-byte pieces."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for piece in iter(lambda: fh.read(block), b""):
-            h.update(piece)
-    return h.hexdigest()
+def sha256_of(path: str | os.PathLike[str]) -> str:
+    """Hex sha256 of a file (see :func:`abco_data.manifest.file_digest`)."""
+    return file_digest(path)[1]
 
 
 def _check_episode_ends(a: DatasetArrays, path: Path) -> None:
@@ -66,6 +63,22 @@ def _check_episode_ends(a: DatasetArrays, path: Path) -> None:
     sums = np.add.reduceat(a.rewards, a.episode_transition_starts) if len(ends) else ends
     if not np.allclose(sums, a.episode_returns, rtol=0, atol=1e-9):
         raise CorruptDatasetError(f"{path}: stored episode returns differ from reward sums")
+
+
+def _check_palette(ds, path: Path) -> None:
+    """Every palette index of palette-encoded observations names a palette entry."""
+    reader = ds._observations()
+    if reader.palette is None:
+        return
+    k, step = len(reader.palette), 4096
+    for start in range(0, len(reader), step):
+        block = reader.ds[start : start + step]
+        if reader.encoding == "palette4":
+            block = unpack4(block)
+        if block.size and int(block.max()) >= k:
+            raise CorruptDatasetError(
+                f"{path}: observations {start}..{start + len(block) - 1} hold palette"
+                f" index {int(block.max())}, but observation_palette has {k} entries")
 
 
 def _render_check(ds, a: DatasetArrays, path: Path) -> int:
@@ -120,6 +133,7 @@ def verify(path: str | os.PathLike[str], *, sha256: str | None = None,
         actions = a.actions if a.actions is not None else a.idm_eval_actions
         if len(actions) and (actions.min() < 0 or actions.max() >= ds.action_space.n):
             raise CorruptDatasetError(f"{path}: actions outside the action space")
+        _check_palette(ds, path)
         rendered = _render_check(ds, a, path) if a.positions is not None else 0
     finally:
         ds.close()

@@ -24,7 +24,8 @@ def test_generate_info_verify(tmp_path, capsys):
     captured = capsys.readouterr()
     assert "sha256" in captured.out and captured.err == ""  # --quiet: no progress bar
     assert cli.main(["info", str(out_path)]) == 0
-    assert "episodes:    2" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "episodes:    2" in out and "observations palette4 (5 colours)" in out
     assert cli.main(["verify", str(out_path)]) == 0
     assert capsys.readouterr().out.startswith("OK ")
     assert cli.main(["verify", str(out_path), "--sha256", "0" * 64]) == 1

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from data_testing import make_small
 
+import abco_data
 from abco_data.format import REQUIRED_ROOT_ATTRS, space_from_json, space_to_json
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "format.md"
@@ -24,6 +25,14 @@ def _table(heading: str) -> list[list[str]]:
             break
         table.append([c.strip() for c in line.strip("|").split("|")])
     return table[2:]  # header and separator rows
+
+
+def _decoded(path) -> np.ndarray:
+    """The observations of ``path``, decoded by the document's plain-h5py snippet."""
+    text = DOC.read_text().split("### Observation encoding", 1)[1]
+    scope = {"h5py": h5py, "np": np, "path": path}
+    exec(text.split("```python\n", 1)[1].split("```", 1)[0], scope)
+    return scope["obs"]
 
 
 def _name(cell: str) -> str:
@@ -60,6 +69,12 @@ def test_columns_as_documented(path):
         tables = (_table("### Flat columns") + _table("### Per-episode columns"))
         for row in tables:
             name, shape, note = _name(row[0]), row[1], " ".join(row[2:])
+            if shape.startswith("`(K, 3)`"):  # only with observation_encoding "palette"
+                palette = f.attrs["observation_encoding"] != "raw"
+                assert (name in f) == palette == maze, name
+                if palette:
+                    assert f[name].shape[1] == 3 and 1 <= len(f[name]) <= 256
+                continue
             if "pre_demonstrations` only" in note and kind != "pre_demonstrations":
                 assert name not in f
                 continue
@@ -79,8 +94,8 @@ def test_columns_as_documented(path):
 
 def test_transitions_per_the_document(path):
     """Rebuild every transition from the offsets alone and check the documented invariants."""
+    obs = _decoded(path)
     with h5py.File(path) as f:
-        obs = f["observations"][()]
         off = f["episodes/obs_offset"][()]
         toff = f["episodes/transition_offset"][()]
         length = f["episodes/length"][()]
@@ -104,8 +119,27 @@ def test_transitions_per_the_document(path):
 def test_storage_as_documented(path):
     with h5py.File(path) as f:
         obs = f["observations"]
-        assert obs.compression == "gzip" and obs.compression_opts == 6
-        if obs.ndim == 4:
-            assert obs.chunks[0] == 32
+        image = f.attrs["env_id"].startswith("AbcoMaze")
+        assert obs.compression == "gzip"
+        assert obs.compression_opts == (3 if image else 6)
+        if image:
+            assert f.attrs["observation_encoding"] == "palette4"
+            assert obs.shape[1:] == (64, 32) and obs.dtype == np.uint8 and obs.chunks[0] == 64
+            palette = f["observation_palette"]
+            assert palette.dtype == np.uint8 and palette.shape == (5, 3)
+            assert palette.compression is None
+            assert f["episodes/layout"].compression_opts == 3
+        else:
+            assert f.attrs["observation_encoding"] == "raw"
+            assert "observation_palette" not in f
+        assert f["rewards"].compression_opts == 6
         assert obs.maxshape[0] is None
         assert list(f.attrs) == sorted(f.attrs)
+
+
+def test_decoding_snippet_of_the_document(path):
+    """The document's plain-h5py snippet gives the frames abco's reader gives."""
+    obs = _decoded(path)
+    expected = abco_data.open_dataset(path).load_arrays().observations
+    assert obs.dtype == expected.dtype
+    np.testing.assert_array_equal(obs, expected)
