@@ -1,0 +1,451 @@
+"""ABCO(alpha) and its baselines in one file (Monteiro, Gavenski et al., IJCNN 2020).
+
+Algorithm 1 of the paper, top to bottom (:meth:`ABCO.train_iteration` then
+:meth:`ABCO.observe`, called by the harness in :mod:`abco_train.train` for ``i = 0..alpha``):
+
+1. ``I_s = I_pre`` (random-policy transitions with true actions).
+2. Train the IDM on ``I_s`` (cross-entropy, Adam); label every expert pair ``(s_t, s_t+1)``
+   with the IDM's argmax; train the policy on those labels (behavioural cloning).
+3. The harness runs the greedy policy on the evaluation episodes (mazes: every layout of the
+   train split); each run's ``(s_t, a_t, s_t+1)`` is a post-demonstration, ``v_e = 1`` if it
+   reached the goal.
+4. Re-sample ``I_s`` from ``I_pre`` and ``I_pos`` (:mod:`abco_train.sampling`).
+
+Choices where the paper is loose:
+
+* Sizes are **per class**: ``|I_s| = N`` (default ``|I_pre|``, capped by ``idm_samples``);
+  ``n_pos_c = round(N * w * q_c)`` with ``w = P(g|E)`` the latest win rate and ``q_c`` the
+  per-run average action distribution of the winning runs (Eq. 4 normalised);
+  ``n_pre_c = round(N * (1 - w) * p_c)`` with ``p_c`` the class shares of ``I_pre`` (Eq. 6);
+  largest-remainder rounding; uniform draws within a class, seeded.
+* ``I_pos`` **accumulates**: Algorithm 1 appends to it and never clears it, so the winning
+  runs of every iteration so far form the pool (their actions are the policy's own, hence
+  true labels of those transitions). The win rate ``w`` is that of the latest iteration only:
+  it measures the current policy.
+* Both networks are improved, not re-initialised, across iterations ("Improve M_theta").
+
+Variants (switches of one implementation, see :data:`VARIANTS`): ``bc`` (policy on the true
+expert actions), ``bco`` (BCO(0): IDM on ``I_pre`` once), ``bco-alpha`` (IDM re-trained on all
+post-demonstrations), ``abco`` (attention + partial sampling), and the ablations of Table 2:
+``attention`` (attention, BCO(alpha) data), ``sampling-partial`` and ``sampling-whole`` (no
+attention), ``abco-whole`` (attention + whole sampling).
+"""
+
+from __future__ import annotations
+
+import json
+import random
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from abco_train.evaluate import Rollouts, is_maze
+from abco_train.methods import Method, register
+from abco_train.nets import build_networks
+from abco_train.sampling import sample_training_set
+
+__all__ = ["Config", "VARIANTS", "ABCO", "TrainingData", "load_training_data", "seed_everything"]
+
+#: Method switches: (train the IDM, attention, how I_s is built after iteration 0).
+#: ``idm_data``: "pre" = I_pre only (BCO(0)), "pos" = all post-demonstrations (BCO(alpha)),
+#: "partial" / "whole" = ABCO's sampling from winning / all runs; ``None`` = no IDM (BC).
+VARIANTS: dict[str, dict[str, Any]] = {
+    "bc": {"attention": False, "idm_data": None, "iterative": False},
+    "bco": {"attention": False, "idm_data": "pre", "iterative": False},
+    "bco-alpha": {"attention": False, "idm_data": "pos", "iterative": True},
+    "abco": {"attention": True, "idm_data": "partial", "iterative": True},
+    "attention": {"attention": True, "idm_data": "pos", "iterative": True},
+    "sampling-partial": {"attention": False, "idm_data": "partial", "iterative": True},
+    "sampling-whole": {"attention": False, "idm_data": "whole", "iterative": True},
+    "abco-whole": {"attention": True, "idm_data": "whole", "iterative": True},
+}
+
+
+@dataclass
+class Config:
+    """Every setting of a run; ``None`` means "the default for this env and preset".
+
+    Attributes:
+        env: Gymnasium id of one of the six environments.
+        method: A registered method (:func:`abco_train.methods.available`).
+        seed: Seed of everything (same seed, same CPU run).
+        preset: ``cpu`` (compact CNN on images) or ``paper`` (the paper's ResNet-18).
+        iterations: ``alpha``: iterations ``0..alpha`` run (iterative variants only).
+        arch: ``mlp``, ``cnn`` or ``resnet18``.
+        attention: Override the method's attention switch.
+        idm_epochs: Epochs over ``I_s`` per iteration.
+        policy_epochs: Epochs over the expert data per iteration.
+        first_epochs_factor: Iteration 0 trains both nets this many times longer.
+        batch_size: Minibatch size.
+        lr: Adam learning rate of both nets.
+        idm_samples: Cap on ``N = |I_s|`` (default ``|I_pre|``).
+        pre_transitions: Use at most this many pre-demonstration transitions.
+        expert_episodes: Use at most this many expert episodes.
+        eval_episodes: Classic control: episodes per evaluation (mazes: every layout).
+        eval_layouts: Mazes: evaluate the first k layouts only (tests).
+        protocol: Maze evaluation protocol, ``paper`` or ``standard``.
+        eval_max_steps: Cap on evaluation episode length (default: the env's limit).
+        expert_data: Expert dataset id or file (default: the env's ``expert`` dataset).
+        pre_data: Pre-demonstration dataset id or file.
+        cache_dir: abco dataset cache.
+        run_dir: Run folder (default ``runs/{env}-{method}-s{seed}``).
+        threads: ``torch.set_num_threads``.
+        deterministic: ``torch.use_deterministic_algorithms``.
+        quiet: No progress bars.
+        plot_layouts: Mazes: layouts whose paths are drawn.
+        plots: Draw the figures at the end.
+    """
+
+    env: str = "AbcoMaze5x5-v0"
+    method: str = "abco"
+    seed: int = 0
+    preset: str = "cpu"
+    iterations: int | None = None
+    arch: str | None = None
+    attention: bool | None = None
+    idm_epochs: int | None = None
+    policy_epochs: int | None = None
+    first_epochs_factor: int | None = None
+    batch_size: int | None = None
+    lr: float | None = None
+    idm_samples: int | None = None
+    pre_transitions: int | None = None
+    expert_episodes: int | None = None
+    eval_episodes: int | None = None
+    eval_layouts: int | None = None
+    protocol: str = "paper"
+    eval_max_steps: int | None = None
+    expert_data: str | None = None
+    pre_data: str | None = None
+    cache_dir: str | None = None
+    run_dir: str | None = None
+    threads: int = 2
+    deterministic: bool = True
+    quiet: bool = False
+    plot_layouts: int = 4
+    plots: bool = True
+    method_options: dict[str, Any] = field(default_factory=dict)
+
+    def resolved(self) -> Config:
+        """A copy with every ``None`` default filled in for its env and preset."""
+        maze = is_maze(self.env)
+        image = maze  # the mazes' datasets are 64x64 RGB
+        paper = self.preset == "paper"
+        base: dict[str, Any] = {
+            "iterations": 2,
+            "arch": ("resnet18" if paper else "cnn") if image else "mlp",
+            "idm_epochs": 1 if image else 2,
+            "policy_epochs": 3 if image else 4,
+            "first_epochs_factor": 3 if image else 2,
+            "batch_size": 64 if image else 512,
+            "lr": 1e-3 if image else 3e-3,
+            "idm_samples": 20_000 if image else 50_000,
+            "pre_transitions": None,
+            "expert_episodes": None,
+            "eval_episodes": None if maze else 100,
+            "eval_layouts": None,
+        }
+        if self.env.startswith("AbcoMaze10x10"):  # small cells: both nets need longer
+            base.update(idm_epochs=2, policy_epochs=10)
+        if paper:
+            base.update(batch_size=32, lr=1e-4 if image else 1e-3)
+        values = asdict(self)
+        for key, default in base.items():
+            if values[key] is None:
+                values[key] = default
+        if values["attention"] is None:
+            values["attention"] = VARIANTS.get(self.method, {}).get("attention", True)
+        if values["run_dir"] is None:
+            values["run_dir"] = str(Path("runs") / f"{self.env}-{self.method}-s{self.seed}")
+        return Config(**values)
+
+    def to_json(self) -> str:
+        """The config as JSON."""
+        return json.dumps(asdict(self), indent=2, sort_keys=True)
+
+    @classmethod
+    def field_names(cls) -> list[str]:
+        """Names of the settings."""
+        return [f.name for f in fields(cls)]
+
+
+def seed_everything(seed: int, threads: int = 2, deterministic: bool = True) -> np.random.Generator:
+    """Seed python and torch, return the run's numpy Generator (the only numpy randomness);
+    make torch's CPU kernels deterministic where cheap."""
+    random.seed(seed)
+    torch.manual_seed(seed)
+    torch.set_num_threads(threads)
+    torch.set_flush_denormal(True)
+    torch.use_deterministic_algorithms(deterministic, warn_only=True)
+    return np.random.default_rng(seed)
+
+
+@dataclass
+class TrainingData:
+    """The datasets of a run, in memory.
+
+    ``pre_*`` are the pre-demonstrations (true actions); ``expert_*`` the expert's states
+    (``expert_eval_actions`` only measures IDM accuracy and trains ``bc``).
+    """
+
+    env_id: str
+    env_kwargs: dict[str, Any]
+    observation_space: Any
+    n_actions: int
+    reference: Any
+    pre_obs: np.ndarray
+    pre_t: np.ndarray
+    pre_actions: np.ndarray
+    expert_obs: np.ndarray
+    expert_t: np.ndarray
+    expert_eval_actions: np.ndarray
+
+
+def _open(ref: str | None, env_id: str, kind: str, config: Config) -> Any:
+    """A dataset from a file path, or by id through ``abco_data.load`` (cache/Hub/generate)."""
+    import abco_data
+
+    if ref is not None and Path(ref).is_file():
+        return abco_data.open_dataset(ref)
+    dataset_id = ref or abco_data.dataset_id(env_id, kind)
+    return abco_data.load(dataset_id, cache_dir=config.cache_dir, progress=not config.quiet)
+
+
+def load_training_data(config: Config) -> TrainingData:
+    """Load (download or generate if needed) and subsample the run's two datasets."""
+    expert = _open(config.expert_data, config.env, "expert", config)
+    pre = _open(config.pre_data, config.env, "pre_demonstrations", config)
+    arrays = {}
+    for name, ds, limit_key in (("pre", pre, None), ("expert", expert, "expert_episodes")):
+        a = ds.load_arrays()
+        obs_t, _ = ds.transition_index()
+        actions = ds.actions_of_transitions(idm_eval=True)
+        if limit_key and getattr(config, limit_key) is not None:
+            keep_eps = int(getattr(config, limit_key))
+            n_tr = int(a.episode_lengths[:keep_eps].sum())
+            obs_t, actions = obs_t[:n_tr], actions[:n_tr]
+        arrays[name] = (a.observations, obs_t, actions)
+    pre_obs, pre_t, pre_actions = arrays["pre"]
+    if config.pre_transitions is not None:
+        pre_t, pre_actions = pre_t[: config.pre_transitions], pre_actions[: config.pre_transitions]
+    kwargs = json.loads(expert.attrs.get("env_kwargs", "{}") or "{}")
+    return TrainingData(
+        env_id=config.env, env_kwargs=kwargs, observation_space=expert.observation_space,
+        n_actions=int(expert.action_space.n), reference=expert.reference,
+        pre_obs=pre_obs, pre_t=pre_t, pre_actions=pre_actions,
+        expert_obs=arrays["expert"][0], expert_t=arrays["expert"][1],
+        expert_eval_actions=arrays["expert"][2],
+    )  # fmt: skip
+
+
+def _fit(
+    net: torch.nn.Module,
+    opt: torch.optim.Optimizer,
+    inputs: Any,
+    labels: torch.Tensor,
+    epochs: int,
+    batch_size: int,
+    rng: np.random.Generator,
+    desc: str = "",
+    quiet: bool = True,
+) -> float:
+    """Cross-entropy epochs over ``labels``; ``inputs(idx) -> args of net``. Mean last loss."""
+    from tqdm.auto import tqdm
+
+    net.train()
+    n, loss_sum, seen = len(labels), 0.0, 0
+    batches = -(-n // batch_size)
+    bar = tqdm(total=epochs * batches, desc=desc, leave=False, disable=quiet, unit="batch")
+    for _ in range(epochs):
+        order = torch.from_numpy(rng.permutation(n))
+        loss_sum, seen = 0.0, 0
+        for start in range(0, n, batch_size):
+            bar.update(1)
+            idx = order[start : start + batch_size]
+            loss = F.cross_entropy(net(*inputs(idx)), labels[idx])
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            loss_sum, seen = loss_sum + loss.item() * len(idx), seen + len(idx)
+    bar.close()
+    return loss_sum / max(seen, 1)
+
+
+@torch.no_grad()
+def _predict(net: torch.nn.Module, inputs: Any, n: int, batch_size: int = 512) -> torch.Tensor:
+    """Argmax predictions of ``net`` over ``n`` rows, in batches."""
+    net.eval()
+    out = [
+        net(*inputs(torch.arange(s, min(s + batch_size, n)))).argmax(1)
+        for s in range(0, n, batch_size)
+    ]
+    return torch.cat(out) if out else torch.zeros(0, dtype=torch.long)
+
+
+@register("bc", "bco", "bco-alpha", "abco", "attention", "sampling-partial", "sampling-whole",
+          "abco-whole")  # fmt: skip
+class ABCO(Method):
+    """ABCO(alpha) with the switches of :data:`VARIANTS` (see the module docstring)."""
+
+    def __init__(self, config: Config, data: TrainingData, rng: np.random.Generator) -> None:
+        self.config, self.data, self.rng = config, data, rng
+        variant = VARIANTS[config.method]
+        self.idm_data, self.iterative = variant["idm_data"], variant["iterative"]
+        # -- networks (mean/std of the states standardise vector inputs) ----------------------
+        stats: dict[str, np.ndarray] = {}
+        if len(data.observation_space.shape) == 1:
+            states = data.pre_obs.astype(np.float64)
+            deltas = states[data.pre_t + 1] - states[data.pre_t]
+            stats = {"obs_mean": states.mean(0), "obs_std": states.std(0),
+                     "delta_mean": deltas.mean(0), "delta_std": deltas.std(0)}  # fmt: skip
+        self.policy, self.idm = build_networks(
+            data.observation_space, data.n_actions, config.arch, bool(config.attention), **stats
+        )
+        self.policy_opt = torch.optim.Adam(self.policy.parameters(), lr=config.lr)
+        self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=config.lr)
+        # -- data as torch tensors (no copies) ------------------------------------------------
+        self.pre_obs = torch.from_numpy(data.pre_obs)
+        self.pre_t = torch.from_numpy(data.pre_t)
+        self.pre_actions = torch.from_numpy(data.pre_actions)
+        self.expert_obs = torch.from_numpy(data.expert_obs)
+        self.expert_t = torch.from_numpy(data.expert_t)
+        # -- I_pos (accumulated post-demonstrations) and the current I_s ----------------------
+        self.pos_obs = torch.zeros((0, *data.pre_obs.shape[1:]), dtype=self.pre_obs.dtype)
+        self.pos_t = torch.zeros(0, dtype=torch.long)
+        self.pos_actions = torch.zeros(0, dtype=torch.long)
+        self.pos_runs = np.zeros(0, dtype=np.int64)
+        self.pos_wins = np.zeros(0, dtype=bool)
+        size = min(len(data.pre_t), config.idm_samples or len(data.pre_t))
+        self.s_pre = torch.from_numpy(rng.choice(len(data.pre_t), size, replace=False))
+        self.s_pos = torch.zeros(0, dtype=torch.long)
+        self.labels: np.ndarray | None = None
+
+    @property
+    def num_iterations(self) -> int:
+        """``alpha + 1`` for iterative variants, else 1."""
+        return int(self.config.iterations) + 1 if self.iterative else 1
+
+    # -- Algorithm 1, one iteration ---------------------------------------------------------
+
+    def train_iteration(self, iteration: int) -> dict[str, float]:
+        """Improve the IDM on ``I_s``, label the expert pairs, clone them into the policy."""
+        cfg, stats = self.config, {}
+        boost = cfg.first_epochs_factor if iteration == 0 else 1
+        expert_n = len(self.expert_t)
+        true = torch.from_numpy(self.data.expert_eval_actions)
+        if self.idm_data is None:  # BC: the supervised reference, true expert actions
+            labels = true
+        else:
+            if iteration == 0 or self.idm_data != "pre":
+                stats["idm_loss"] = self._train_idm(cfg.idm_epochs * boost)
+                stats["idm_samples"] = int(len(self.s_pre) + len(self.s_pos))
+            labels = _predict(self.idm, self._expert_pairs, expert_n)
+            stats["idm_expert_accuracy"] = float((labels == true).float().mean())
+        self.labels = labels.numpy()
+        stats["policy_loss"] = _fit(
+            self.policy, self.policy_opt, lambda idx: (self.expert_obs[self.expert_t[idx]],),
+            labels, cfg.policy_epochs * boost, cfg.batch_size, self.rng, "policy", cfg.quiet,
+        )  # fmt: skip
+        predicted = _predict(self.policy, lambda idx: (self.expert_obs[self.expert_t[idx]],),
+                             expert_n)  # fmt: skip
+        stats["policy_label_accuracy"] = float((predicted == labels).float().mean())
+        return stats
+
+    def _expert_pairs(self, idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        rows = self.expert_t[idx]
+        return self.expert_obs[rows], self.expert_obs[rows + 1]
+
+    def _train_idm(self, epochs: int) -> float:
+        """Cross-entropy epochs of the IDM over ``I_s = I_pre[s_pre] + I_pos[s_pos]``."""
+        n_pre = len(self.s_pre)
+        labels = torch.cat([self.pre_actions[self.s_pre], self.pos_actions[self.s_pos]])
+
+        def pairs(idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            is_pre = idx < n_pre
+            s = torch.empty((len(idx), *self.pre_obs.shape[1:]), dtype=self.pre_obs.dtype)
+            s1 = torch.empty_like(s)
+            rows = self.pre_t[self.s_pre[idx[is_pre]]]
+            s[is_pre], s1[is_pre] = self.pre_obs[rows], self.pre_obs[rows + 1]
+            rows = self.pos_t[self.s_pos[idx[~is_pre] - n_pre]]
+            s[~is_pre], s1[~is_pre] = self.pos_obs[rows], self.pos_obs[rows + 1]
+            return s, s1
+
+        return _fit(self.idm, self.idm_opt, pairs, labels, epochs, self.config.batch_size,
+                    self.rng, "IDM", self.config.quiet)  # fmt: skip
+
+    # -- post-demonstrations and the next I_s --------------------------------------------------
+
+    def observe(self, iteration: int, rollouts: Rollouts) -> dict[str, float]:
+        """Append the runs to ``I_pos`` and re-sample ``I_s`` for the next iteration."""
+        if not self.iterative or self.idm_data is None or rollouts.observations is None:
+            return {}
+        keep_all = self.idm_data in ("pos", "whole")
+        runs = np.arange(len(rollouts.successes))
+        keep = runs if keep_all else runs[rollouts.successes]
+        offset = int(self.pos_wins.shape[0])
+        if len(keep):
+            sel = np.isin(rollouts.run_ids, keep)
+            obs_rows = np.unique(np.concatenate([rollouts.obs_t[sel], rollouts.obs_t[sel] + 1]))
+            remap = np.full(len(rollouts.observations), -1, dtype=np.int64)
+            remap[obs_rows] = np.arange(len(obs_rows)) + len(self.pos_obs)
+            new_obs = torch.from_numpy(rollouts.observations[obs_rows])
+            self.pos_obs = torch.cat([self.pos_obs, new_obs])
+            self.pos_t = torch.cat([self.pos_t, torch.from_numpy(remap[rollouts.obs_t[sel]])])
+            new_actions = torch.from_numpy(rollouts.actions[sel])
+            self.pos_actions = torch.cat([self.pos_actions, new_actions])
+            self.pos_runs = np.concatenate([self.pos_runs, offset + rollouts.run_ids[sel]])
+        self.pos_wins = np.concatenate([self.pos_wins, rollouts.successes])
+        if self.idm_data == "pos":  # BCO(alpha): every post-demonstration so far
+            self.s_pre = torch.zeros(0, dtype=torch.long)
+            self.s_pos = torch.arange(len(self.pos_t))
+            if len(self.s_pos) == 0:  # nothing recorded yet: keep I_pre
+                self.s_pre = torch.arange(len(self.pre_t))
+            return {"pos_transitions": len(self.pos_t)}
+        size = min(len(self.pre_t), self.config.idm_samples or len(self.pre_t))
+        sample = sample_training_set(
+            self.pre_actions.numpy(), self.pos_actions.numpy(), self.pos_runs, self.pos_wins,
+            size, self.rng, mode=self.idm_data, win_rate=rollouts.win_rate,
+            n_actions=self.data.n_actions,
+        )  # fmt: skip
+        self.s_pre = torch.from_numpy(sample.pre_indices)
+        self.s_pos = torch.from_numpy(sample.pos_indices)
+        return {"pos_transitions": len(self.pos_t), "is_from_pos": len(self.s_pos),
+                "is_from_pre": len(self.s_pre)}  # fmt: skip
+
+    # -- acting, labels and state ---------------------------------------------------------------
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Greedy actions of the policy for a batch of observations."""
+        self.policy.eval()
+        return self.policy(torch.as_tensor(obs)).argmax(1).numpy()
+
+    def expert_labels(self) -> np.ndarray | None:
+        """The labels the policy was last trained on (IDM predictions of the expert pairs)."""
+        return self.labels
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything needed to resume: nets, optimisers, I_pos, I_s, labels, rng."""
+        return {
+            "policy": self.policy.state_dict(), "idm": self.idm.state_dict(),
+            "policy_opt": self.policy_opt.state_dict(), "idm_opt": self.idm_opt.state_dict(),
+            "pos_obs": self.pos_obs, "pos_t": self.pos_t, "pos_actions": self.pos_actions,
+            "pos_runs": self.pos_runs, "pos_wins": self.pos_wins,
+            "s_pre": self.s_pre, "s_pos": self.s_pos, "labels": self.labels,
+            "rng": self.rng.bit_generator.state,
+        }  # fmt: skip
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`state_dict`."""
+        self.policy.load_state_dict(state["policy"])
+        self.idm.load_state_dict(state["idm"])
+        self.policy_opt.load_state_dict(state["policy_opt"])
+        self.idm_opt.load_state_dict(state["idm_opt"])
+        for key in ("pos_obs", "pos_t", "pos_actions", "pos_runs", "pos_wins", "s_pre", "s_pos",
+                    "labels"):  # fmt: skip
+            setattr(self, key, state[key])
+        self.rng.bit_generator.state = state["rng"]

@@ -1,0 +1,92 @@
+"""The run's figures (matplotlib, Agg backend): metrics, IDM label distribution, maze paths."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["plot_metrics", "plot_label_distribution", "plot_maze_paths"]
+
+ACTION_NAMES = {4: ["N", "S", "E", "W"]}
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_metrics(history: list[dict[str, Any]], path: Path) -> Path:
+    """P, AER and success rate of the per-iteration evaluations."""
+    plt = _pyplot()
+    its = [h["iteration"] for h in history]
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.2))
+    for ax, key, title in zip(axes, ("performance", "aer", "success_rate"),
+                              ("Performance P", "AER", "Success rate")):  # fmt: skip
+        ax.plot(its, [h["eval"][key] for h in history], marker="o")
+        ax.set_title(title)
+        ax.set_xlabel("iteration")
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def plot_label_distribution(
+    history: list[dict[str, Any]], truth: np.ndarray, n_actions: int, path: Path
+) -> Path:
+    """The IDM's predicted action distribution on the expert data, per iteration, vs truth."""
+    plt = _pyplot()
+    names = ACTION_NAMES.get(n_actions, [str(a) for a in range(n_actions)])
+    rows = [h for h in history if h.get("label_distribution") is not None]
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    width = 0.8 / (len(rows) + 1)
+    x = np.arange(n_actions)
+    true = np.bincount(truth, minlength=n_actions) / max(len(truth), 1)
+    ax.bar(x, true, width, label="expert (true)", color="black")
+    for k, h in enumerate(rows, start=1):
+        ax.bar(x + k * width, h["label_distribution"], width, label=f"iter {h['iteration']}")
+    ax.set_xticks(x + 0.4 - width / 2, names)
+    ax.set_ylabel("share of expert transitions")
+    ax.set_title("IDM labels of the expert data")
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def plot_maze_paths(
+    env_id: str, split: str, layout_indices: list[int], paths: list[np.ndarray],
+    successes: list[bool], path: Path,
+) -> Path:  # fmt: skip
+    """The agent's paths drawn over a few maze layouts."""
+    import abco_envs
+    from abco_envs.maze.render import MazeRenderer
+
+    plt = _pyplot()
+    n = abco_envs.maze_size(env_id)
+    pool = abco_envs.layout_pool(n).split(split)
+    renderer = MazeRenderer(n, 256, 256)
+    fig, axes = plt.subplots(1, len(layout_indices), figsize=(3 * len(layout_indices), 3.2))
+    axes = np.atleast_1d(axes)
+    for ax, k, cells_path, ok in zip(axes, layout_indices, paths, successes):
+        ax.imshow(renderer.background(pool[k]))
+        centre = 256 / n
+        ys = (cells_path[:, 0] + 0.5) * centre
+        xs = (cells_path[:, 1] + 0.5) * centre
+        ax.plot(xs, ys, color="tab:blue", lw=2)
+        ax.scatter(xs[-1:], ys[-1:], color="tab:orange", zorder=3)
+        ax.set_title(f"{split} #{k}: {'goal' if ok else 'failed'} ({len(cells_path) - 1} steps)",
+                     fontsize=8)  # fmt: skip
+        ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

@@ -1,0 +1,61 @@
+"""docs/benchmarking.md runs: the user's method, its ``abco bench``/``abco report`` commands."""
+
+from __future__ import annotations
+
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+from test_bench_grid import tiny_overrides
+
+from abco_train import bench, report
+
+ROOT = Path(__file__).resolve().parents[1]
+DOC = ROOT / "docs" / "benchmarking.md"
+EXAMPLE = ROOT / "docs" / "examples" / "my_method.py"
+
+
+def _blocks(language: str) -> list[str]:
+    return re.findall(rf"^```{language}\n(.*?)^```", DOC.read_text(), re.S | re.M)
+
+
+def _commands(block: str) -> list[list[str]]:
+    return [shlex.split(line) for line in block.replace("\\\n", " ").splitlines()
+            if line.startswith("abco ")]  # fmt: skip
+
+
+def test_documented_method_is_the_example_file() -> None:
+    assert _blocks("python")[0] == EXAMPLE.read_text()
+
+
+def test_documented_commands_parse() -> None:
+    for block in _blocks("bash"):
+        for argv in _commands(block):
+            parser = {"bench": bench.build_parser, "report": report.build_parser}[argv[1]]()
+            parser.parse_args(argv[2:])
+
+
+def test_user_method_beside_abco(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    overrides = tiny_overrides(tmp_path / "data")
+    monkeypatch.chdir(tmp_path)  # the doc's relative runs/ folder lands in tmp_path
+    (tmp_path / "docs" / "examples").mkdir(parents=True)
+    (tmp_path / "docs" / "examples" / "my_method.py").write_text(EXAMPLE.read_text())
+    tiny = [f"--{k.replace('_', '-')}={v}" for k, v in overrides.items()]
+    mine = [argv for argv in _commands(_blocks("bash")[-1])]
+    assert [argv[1] for argv in mine] == ["bench", "report"]
+    for argv in mine:
+        if argv[1] == "bench":  # fewer seeds and a tiny budget, else the command as written
+            argv = [a if a != "0-4" else "0" for a in argv] + tiny + ["--quiet", "--threads=1"]
+            assert bench.main(argv[2:]) == 0
+        else:
+            assert report.main(argv[2:]) == 0
+    md = (tmp_path / "runs" / "mine" / "report" / "report.md").read_text()
+    assert "| CartPole-v1 | knn-ifo | 1 |" in md and "| CartPole-v1 | abco | 1 |" in md
+    # the Python API block: the same grid, now all finished, then the report
+    code = _blocks("python")[-1].replace("[0, 1, 2, 3, 4]", "[0]")
+    namespace = {"OVERRIDES": overrides}
+    exec(compile(code, str(DOC), "exec"), namespace)
+    assert namespace["files"]["report"].exists()
+    log = (tmp_path / "runs" / "mine" / bench.BENCH_LOG).read_text().splitlines()
+    assert '"skipped": 2' in log[-1] and '"ran": 0' in log[-1]

@@ -1,0 +1,168 @@
+"""``abco bench`` on a tiny CartPole grid (local processes) and ``abco report`` from it."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import abco_data
+from abco_train import bench, report
+
+TINY_TRAINING = {"iterations": 1, "idm_epochs": 1, "policy_epochs": 1, "eval_episodes": 3}
+
+
+def tiny_overrides(directory: Path) -> dict[str, Any]:
+    """Trainer overrides of a seconds-long CartPole cell on tiny generated datasets."""
+    directory.mkdir(parents=True, exist_ok=True)
+    expert = abco_data.generate("abco/cartpole-expert-v0", directory / "expert.hdf5",
+                                progress=False, episodes=2, reference_episodes=3,
+                                reference_expert_episodes=2)  # fmt: skip
+    pre = abco_data.generate("abco/cartpole-pre-v0", directory / "pre.hdf5", progress=False,
+                             transitions=500, reference_episodes=3,
+                             reference_expert_episodes=2)  # fmt: skip
+    return {"expert_data": str(expert), "pre_data": str(pre), **TINY_TRAINING}
+
+
+def comparable_final(run_dir: Path) -> dict[str, Any]:
+    """``final.json`` without what legitimately differs between hosts (paths, timings)."""
+    final = json.loads((run_dir / "final.json").read_text())
+    return {k: v for k, v in final.items() if k not in ("figures", "seconds")}
+
+
+def comparable_metrics(run_dir: Path) -> list[dict[str, Any]]:
+    """``metrics.jsonl`` without the timings."""
+    lines = (run_dir / "metrics.jsonl").read_text().splitlines()
+    return [{k: v for k, v in json.loads(x).items() if not k.startswith("seconds")}
+            for x in lines]  # fmt: skip
+
+
+CELLS = bench.plan(["CartPole-v1"], ["bco-alpha", "abco"], [0, 1])
+
+
+@pytest.fixture(scope="module")
+def grid(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """The tiny grid, run once; one cell was interrupted beforehand (checkpoint, no final)."""
+    from abco_train.abco import Config
+    from abco_train.train import train
+
+    root = tmp_path_factory.mktemp("bench")
+    overrides = tiny_overrides(root / "data")
+    out = root / "runs"
+    interrupted = bench.cell_config(CELLS[-1], out, overrides, threads=1)
+    assert train(Config(**interrupted), stop_after=1) is None
+    summary = bench.run_grid(CELLS, out, overrides=overrides, jobs=2, threads=1, quiet=True)
+    return {"out": out, "overrides": overrides, "summary": summary}
+
+
+def test_parse_seeds_and_lists() -> None:
+    assert bench.parse_seeds("0-4") == [0, 1, 2, 3, 4]
+    assert bench.parse_seeds("3, 1-2,3") == [3, 1, 2]
+    assert bench.parse_list("a, b,,a") == ["a", "b"]
+    for bad in ("x", "4-2", ""):
+        with pytest.raises(ValueError):
+            bench.parse_seeds(bad)
+
+
+def test_cell_config_rejects_per_cell_overrides() -> None:
+    with pytest.raises(ValueError, match="seed"):
+        bench.cell_config(CELLS[0], "out", {"seed": 3})
+
+
+def test_grid_runs_every_cell(grid: dict[str, Any]) -> None:
+    out, summary = grid["out"], grid["summary"]
+    assert summary["ran"] == 4 and summary["skipped"] == 0 and summary["failed"] == []
+    rows = bench.read_results(out)
+    assert sorted(rows) == sorted(c.key for c in CELLS)
+    for cell in CELLS:
+        row = rows[cell.key]
+        assert row["status"] == "done" and row["wall_s"] > 0
+        assert row["final"]["episodes"]["episodes"] == 3
+        assert row["reference"]["expert"] > row["reference"]["random"]
+        assert (cell.run_dir(out) / "final.json").exists()
+        assert json.loads((cell.run_dir(out) / "config.json").read_text())["threads"] == 1
+    # the interrupted cell resumed after its first iteration: both iterations logged once
+    its = [r["iteration"] for r in comparable_metrics(CELLS[-1].run_dir(out))]
+    assert its == [0, 1]
+    log = [json.loads(x) for x in (out / bench.BENCH_LOG).read_text().splitlines()]
+    assert log[-1]["ran"] == 4 and log[-1]["wall_s"] > 0
+
+
+def test_rerun_skips_finished_cells(grid: dict[str, Any]) -> None:
+    out = grid["out"]
+    before = bench.read_results(out)
+    mtimes = {c.key: (c.run_dir(out) / "final.json").stat().st_mtime_ns for c in CELLS}
+    code = bench.main([
+        "--envs", "CartPole-v1", "--methods", "bco-alpha,abco", "--seeds", "0-1", "--out",
+        str(out), "--quiet", "--threads", "1",
+        *[f"--{k.replace('_', '-')}={v}" for k, v in grid["overrides"].items()],
+    ])  # fmt: skip
+    assert code == 0
+    log = [json.loads(x) for x in (out / bench.BENCH_LOG).read_text().splitlines()]
+    assert log[-1]["skipped"] == 4 and log[-1]["ran"] == 0
+    assert bench.read_results(out) == before
+    assert mtimes == {c.key: (c.run_dir(out) / "final.json").stat().st_mtime_ns for c in CELLS}
+
+
+def test_finished_cell_of_another_config_is_refused(grid: dict[str, Any]) -> None:
+    changed = {**grid["overrides"], "idm_epochs": 2}
+    with pytest.raises(ValueError, match="another config"):
+        bench.run_grid(CELLS, grid["out"], overrides=changed, threads=1, quiet=True)
+
+
+def test_unknown_method_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="unknown method"):
+        bench.run_grid(bench.plan(["CartPole-v1"], ["nope"], [0]), tmp_path, quiet=True)
+
+
+def test_report_from_grid(grid: dict[str, Any], tmp_path: Path) -> None:
+    assert report.main([str(grid["out"]), "--out", str(tmp_path), "--labels-env",
+                        "CartPole-v1"]) == 0  # fmt: skip
+    md = (tmp_path / "report.md").read_text()
+    for heading in ("## Table 1: train split", "## Table 1, mazes on the held-out test split",
+                    "## Table 2: ablation", "## Goals for ABCO", "## Reference returns",
+                    "## Wall time", "## Missing or unfinished cells"):  # fmt: skip
+        assert heading in md
+    assert "AbcoMaze5x5-v0 / abco: missing all seeds" in md  # cells not in the tiny grid
+    assert "CartPole-v1 / bc: missing all seeds" in md
+    assert "short by" in md  # a tiny budget falls short of the paper's CartPole
+    assert (tmp_path / "performance_per_iteration.png").stat().st_size > 0
+    assert (tmp_path / "idm_label_distribution.png").stat().st_size > 0
+    with (tmp_path / "results.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    measured = [r for r in rows if r["table"] == "table1" and r["seeds"] != "0"]
+    assert {(r["method"], r["metric"]) for r in measured} == {
+        ("bco-alpha", "performance"), ("bco-alpha", "aer"), ("abco", "performance"),
+        ("abco", "aer")}  # fmt: skip
+    finals = {c.key: json.loads((c.run_dir(grid["out"]) / "final.json").read_text())
+              for c in CELLS}  # fmt: skip
+    for r in measured:
+        assert r["seeds"] == "2" and r["evaluation"] == "episodes"
+        lo, mean, hi = float(r["ci_low"]), float(r["mean"]), float(r["ci_high"])
+        assert lo <= mean <= hi
+        per_seed = [f["episodes"][r["metric"]] for k, f in finals.items() if r["method"] in
+                    k.split("/")[1:2]]  # fmt: skip
+        assert mean == pytest.approx(sum(per_seed) / len(per_seed))
+        assert float(r["paper"]) == report.PAPER_TABLE1[r["method"]]["CartPole-v1"][
+            0 if r["metric"] == "performance" else 1]
+    # the CSV's numbers are the Markdown's
+    abco_p = next(r for r in measured if r["method"] == "abco" and r["metric"] == "performance")
+    assert f"{float(abco_p['mean']):.3f} [{float(abco_p['ci_low']):.3f}," in md
+
+
+def test_results_rebuilt_from_run_folders(grid: dict[str, Any]) -> None:
+    """Cells finished outside ``abco bench`` (or a lost results.jsonl) are collected too."""
+    out = grid["out"]
+    (out / bench.RESULTS_FILE).unlink()
+    summary = bench.run_grid(CELLS, out, overrides=grid["overrides"], threads=1, quiet=True)
+    assert summary["skipped"] == 4 and summary["ran"] == 0
+    rows = bench.read_results(out)
+    assert sorted(rows) == sorted(c.key for c in CELLS)
+    for cell in CELLS:
+        row = rows[cell.key]
+        assert row["status"] == "done" and row["wall_s"] is None
+        assert row["final"] == json.loads((cell.run_dir(out) / "final.json").read_text())
+        assert row["reference"]["expert"] == 500.0
