@@ -5,23 +5,12 @@ into ``--out`` (default ``RUNS_DIR/report``). Numbers come from every
 ``RUNS_DIR/{env}/{method}/seed{seed}/final.json``; wall times, reference returns and failures
 from ``results.jsonl`` and ``bench_log.jsonl`` (:mod:`abco_train.bench`).
 
-Statistics of one (env, method, evaluation) cell over its seeds:
-
-* point estimates: the mean and the IQM (mean of the middle 50%: ``floor(n/4)`` values cut at
-  each end, as ``scipy.stats.trim_mean(x, 0.25)``) of the per-seed scores;
-* 95% confidence interval: a two-stage percentile bootstrap (numpy only, seeded, 10,000
-  replicates): each replicate draws ``n`` seeds with replacement and, where ``final.json``
-  holds per-episode values (``episode_returns`` / ``episode_performance``), redraws each drawn
-  seed's episodes with replacement; the statistic (mean or IQM) of the replicate's per-seed
-  scores gives the bootstrap distribution and its 2.5th and 97.5th percentiles the interval.
-  Without per-episode values (the trainer's ``final.json`` today) it resamples seeds only.
+Statistics (mean, IQM, bootstrap intervals) are :mod:`abco_train.stats`; the published
+numbers :mod:`abco_train.paper`.
 
 Example:
-    >>> iqm([1.0, 2.0, 3.0, 4.0, 100.0])
-    3.0
-    >>> lo, hi = bootstrap_ci([np.array([1.0]), np.array([3.0])])
-    >>> (lo, hi)
-    (1.0, 3.0)
+    >>> table_evaluation("AbcoMaze5x5-v0", "test"), table_evaluation("CartPole-v1")
+    ('test/paper', 'episodes')
 """
 
 from __future__ import annotations
@@ -36,10 +25,12 @@ from typing import Any
 
 import numpy as np
 
+from abco_train.paper import PAPER_TABLE1, PAPER_TABLE2
+from abco_train.stats import CellStats, cell_stats
+
 __all__ = [
-    "PAPER_TABLE1", "PAPER_TABLE2", "TABLE1_ENVS", "TABLE1_METHODS", "TABLE2_METHODS", "GOALS",
-    "Run", "CellStats", "iqm", "bootstrap_ci", "cell_stats", "load_runs", "write_report",
-    "add_subcommands", "build_parser", "main",
+    "TABLE1_ENVS", "TABLE1_METHODS", "TABLE2_METHODS", "GOALS", "Run", "load_runs",
+    "write_report", "add_subcommands", "build_parser", "main",
 ]  # fmt: skip
 
 MAZES = ("AbcoMaze3x3-v0", "AbcoMaze5x5-v0", "AbcoMaze10x10-v0")
@@ -55,105 +46,14 @@ TABLE2_METHODS = {
 }  # fmt: skip
 TABLE2_ENV = "AbcoMaze5x5-v0"
 
-# The published numbers, (P, AER), from Monteiro, Gavenski, Granada, Meneguzzi, Barros,
-# "Augmented Behavioral Cloning from Observation", IJCNN 2020 (arXiv:2004.13529),
-# Table 1 (tab:results_maze) and Table 2 (tab:ablation), copied as printed.
-PAPER_TABLE1: dict[str, dict[str, tuple[float, float]]] = {
-    "bc": {"CartPole-v1": (1.000, 500.0), "Acrobot-v1": (1.071, -83.590),
-           "MountainCar-v0": (1.560, -117.720), "AbcoMaze3x3-v0": (-1.207, 0.180),
-           "AbcoMaze5x5-v0": (-0.921, -0.507), "AbcoMaze10x10-v0": (-0.470, -1.000)},
-    "bco-alpha": {"CartPole-v1": (1.000, 500.0), "Acrobot-v1": (0.980, -117.600),
-                  "MountainCar-v0": (0.948, -150.00), "AbcoMaze3x3-v0": (0.883, 0.927),
-                  "AbcoMaze5x5-v0": (-0.112, 0.104), "AbcoMaze10x10-v0": (-0.416, -0.941)},
-    "abco": {"CartPole-v1": (1.000, 500.0), "Acrobot-v1": (1.086, -77.900),
-             "MountainCar-v0": (1.289, -132.30), "AbcoMaze3x3-v0": (1.159, 0.908),
-             "AbcoMaze5x5-v0": (0.960, 0.932), "AbcoMaze10x10-v0": (0.860, 0.784)},
-}  # fmt: skip
-# Table 2's BCO AER (-0.941) differs from Table 1's BCO on the 5x5 maze (0.104) in the paper.
-PAPER_TABLE2: dict[str, tuple[float, float]] = {
-    "bco-alpha": (-0.112, -0.941), "attention": (-0.415, -0.940),
-    "sampling-partial": (0.717, 0.716), "sampling-whole": (0.628, 0.676),
-    "abco": (0.960, 0.932), "abco-whole": (0.759, 0.755),
-}  # fmt: skip
 #: The issue's goals for ABCO (mean over seeds): AER >= the paper's, P >= 0.95, 2 h of wall.
 GOALS = {"aer": {e: PAPER_TABLE1["abco"][e][1] for e in TABLE1_ENVS}, "performance": 0.95,
          "wall_s": 2 * 3600.0}  # fmt: skip
-N_BOOT = 10_000
-BOOT_SEED = 0
 
 
 def table_evaluation(env: str, split: str = "train") -> str:
     """The ``final.json`` key of a table's numbers: mazes ``{split}/paper``, else ``episodes``."""
     return f"{split}/paper" if env in MAZES or env.startswith("AbcoMaze") else "episodes"
-
-
-# -- statistics ---------------------------------------------------------------------------
-
-
-def iqm(values: Sequence[float] | np.ndarray) -> float:
-    """Interquartile mean: the mean after cutting ``floor(n / 4)`` values at each end."""
-    x = np.sort(np.asarray(values, dtype=np.float64))
-    cut = int(np.floor(0.25 * len(x)))
-    return float(x[cut : len(x) - cut].mean())
-
-
-def _iqm_rows(x: np.ndarray) -> np.ndarray:
-    x = np.sort(x, axis=1)
-    cut = int(np.floor(0.25 * x.shape[1]))
-    return x[:, cut : x.shape[1] - cut].mean(axis=1)
-
-
-def bootstrap_ci(
-    groups: Sequence[np.ndarray], statistic: str = "mean", n_boot: int = N_BOOT,
-    confidence: float = 0.95, seed: int = BOOT_SEED,
-) -> tuple[float, float]:  # fmt: skip
-    """Two-stage percentile bootstrap interval of ``statistic`` over seeds.
-
-    Args:
-        groups: One array per seed: its episodes' values, or its one score.
-        statistic: ``"mean"`` or ``"iqm"`` of the per-seed means.
-        n_boot: Replicates.
-        confidence: Coverage of the interval.
-        seed: Seed of the resampling.
-    """
-    groups = [np.asarray(g, dtype=np.float64).reshape(-1) for g in groups]
-    n = len(groups)
-    if n == 0:
-        return float("nan"), float("nan")
-    rng = np.random.default_rng(seed)
-    pick = rng.integers(0, n, size=(n_boot, n))  # stage 1: seeds with replacement
-    per_seed = np.empty((n_boot, n))
-    for s, g in enumerate(groups):
-        mask = pick == s
-        if len(g) == 1:
-            per_seed[mask] = g[0]
-        else:  # stage 2: that seed's episodes with replacement
-            k = int(mask.sum())
-            per_seed[mask] = g[rng.integers(0, len(g), size=(k, len(g)))].mean(axis=1)
-    stats = per_seed.mean(axis=1) if statistic == "mean" else _iqm_rows(per_seed)
-    alpha = (1.0 - confidence) / 2
-    lo, hi = np.quantile(stats, [alpha, 1.0 - alpha])
-    return float(lo), float(hi)
-
-
-@dataclass
-class CellStats:
-    """Mean and IQM over seeds, each with its bootstrap interval."""
-
-    n: int
-    mean: float
-    ci: tuple[float, float]
-    iqm: float
-    iqm_ci: tuple[float, float]
-
-
-def cell_stats(groups: Sequence[np.ndarray]) -> CellStats | None:
-    """:class:`CellStats` of per-seed groups (``None`` when there are none)."""
-    if not groups:
-        return None
-    scores = np.array([np.mean(g) for g in groups])
-    return CellStats(len(groups), float(scores.mean()), bootstrap_ci(groups), iqm(scores),
-                     bootstrap_ci(groups, "iqm"))  # fmt: skip
 
 
 # -- the runs -------------------------------------------------------------------------------

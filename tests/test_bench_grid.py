@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 
 import abco_data
-from abco_train import bench, report
+from abco_train import bench, paper, report
 
 TINY_TRAINING = {"iterations": 1, "idm_epochs": 1, "policy_epochs": 1, "eval_episodes": 3}
 
@@ -146,7 +146,7 @@ def test_report_from_grid(grid: dict[str, Any], tmp_path: Path) -> None:
         per_seed = [f["episodes"][r["metric"]] for k, f in finals.items() if r["method"] in
                     k.split("/")[1:2]]  # fmt: skip
         assert mean == pytest.approx(sum(per_seed) / len(per_seed))
-        assert float(r["paper"]) == report.PAPER_TABLE1[r["method"]]["CartPole-v1"][
+        assert float(r["paper"]) == paper.PAPER_TABLE1[r["method"]]["CartPole-v1"][
             0 if r["metric"] == "performance" else 1]
     # the CSV's numbers are the Markdown's
     abco_p = next(r for r in measured if r["method"] == "abco" and r["metric"] == "performance")

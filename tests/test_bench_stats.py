@@ -5,56 +5,56 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from abco_train import report
+from abco_train import paper, report, stats
 
 
 def test_iqm_cuts_a_quarter_at_each_end() -> None:
-    assert report.iqm([1.0, 2.0, 3.0, 4.0, 100.0]) == 3.0  # floor(5/4) = 1 cut per end
-    assert report.iqm([1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 100.0]) == pytest.approx(4.5)
-    assert report.iqm([2.0, 4.0]) == 3.0  # fewer than 4 values: the mean
-    assert report.iqm([-5.0, 1.0, 1.0, 50.0]) == 1.0
+    assert stats.iqm([1.0, 2.0, 3.0, 4.0, 100.0]) == 3.0  # floor(5/4) = 1 cut per end
+    assert stats.iqm([1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 100.0]) == pytest.approx(4.5)
+    assert stats.iqm([2.0, 4.0]) == 3.0  # fewer than 4 values: the mean
+    assert stats.iqm([-5.0, 1.0, 1.0, 50.0]) == 1.0
 
 
 def test_bootstrap_over_seeds_only() -> None:
-    lo, hi = report.bootstrap_ci([np.array([1.0]), np.array([3.0])])
+    lo, hi = stats.bootstrap_ci([np.array([1.0]), np.array([3.0])])
     assert (lo, hi) == (1.0, 3.0)  # replicate means 1, 2, 3 with prob 1/4, 1/2, 1/4
     values = [np.array([v]) for v in (0.2, 0.4, 0.5, 0.9, 1.0)]
-    lo, hi = report.bootstrap_ci(values)
+    lo, hi = stats.bootstrap_ci(values)
     assert 0.2 <= lo < 0.6 < hi <= 1.0
-    assert report.bootstrap_ci(values) == (lo, hi)  # seeded
-    assert report.bootstrap_ci([np.array([7.0])] * 3) == (7.0, 7.0)
-    lo, hi = report.bootstrap_ci(values, "iqm")
-    assert lo <= report.iqm([0.2, 0.4, 0.5, 0.9, 1.0]) <= hi
+    assert stats.bootstrap_ci(values) == (lo, hi)  # seeded
+    assert stats.bootstrap_ci([np.array([7.0])] * 3) == (7.0, 7.0)
+    lo, hi = stats.bootstrap_ci(values, "iqm")
+    assert lo <= stats.iqm([0.2, 0.4, 0.5, 0.9, 1.0]) <= hi
 
 
 def test_two_stage_bootstrap_resamples_episodes_within_seeds() -> None:
     rng = np.random.default_rng(1)
     # identical seed means, noisy episodes: only the inner stage makes the interval wide
     groups = [g - g.mean() + 0.5 for g in (rng.normal(0, 1, 50) for _ in range(4))]
-    lo, hi = report.bootstrap_ci(groups)
+    lo, hi = stats.bootstrap_ci(groups)
     assert lo < 0.5 < hi
     assert hi - lo == pytest.approx(2 * 1.96 / np.sqrt(200), rel=0.3)  # ~ pooled standard error
-    lo1, hi1 = report.bootstrap_ci([np.array([g.mean()]) for g in groups])
+    lo1, hi1 = stats.bootstrap_ci([np.array([g.mean()]) for g in groups])
     assert lo1 == pytest.approx(0.5) and hi1 == pytest.approx(0.5)
 
 
 def test_cell_stats_bounds_contain_the_estimates() -> None:
-    s = report.cell_stats([np.array([v]) for v in (0.91, 0.95, 0.97, 0.99, 0.62)])
+    s = stats.cell_stats([np.array([v]) for v in (0.91, 0.95, 0.97, 0.99, 0.62)])
     assert s is not None and s.n == 5
     assert s.mean == pytest.approx(0.888)
     assert s.iqm == pytest.approx((0.91 + 0.95 + 0.97) / 3)
     assert s.ci[0] <= s.mean <= s.ci[1]
     assert s.iqm_ci[0] <= s.iqm <= s.iqm_ci[1]
-    assert report.cell_stats([]) is None
+    assert stats.cell_stats([]) is None
 
 
 def test_paper_numbers() -> None:
-    assert report.PAPER_TABLE1["abco"]["AbcoMaze5x5-v0"] == (0.960, 0.932)
-    assert report.PAPER_TABLE1["bco-alpha"]["MountainCar-v0"] == (0.948, -150.0)
+    assert paper.PAPER_TABLE1["abco"]["AbcoMaze5x5-v0"] == (0.960, 0.932)
+    assert paper.PAPER_TABLE1["bco-alpha"]["MountainCar-v0"] == (0.948, -150.0)
     assert report.GOALS["aer"] == {"CartPole-v1": 500.0, "Acrobot-v1": -77.9,
                                    "MountainCar-v0": -132.3, "AbcoMaze3x3-v0": 0.908,
                                    "AbcoMaze5x5-v0": 0.932, "AbcoMaze10x10-v0": 0.784}
-    assert set(report.PAPER_TABLE2) == set(report.TABLE2_METHODS)
+    assert set(paper.PAPER_TABLE2) == set(report.TABLE2_METHODS)
     from abco_train.abco import VARIANTS
 
     assert set(report.TABLE1_METHODS) | set(report.TABLE2_METHODS) <= set(VARIANTS)
