@@ -30,7 +30,7 @@ import gymnasium as gym
 import numpy as np
 
 import abco_envs
-from abco_train.metrics import summarize
+from abco_train.metrics import performance, summarize
 
 __all__ = ["PROTOCOLS", "Rollouts", "rollout", "score", "is_maze", "CARTPOLE_GOAL_STEPS"]
 
@@ -208,12 +208,14 @@ def _per_run(
     return [np.concatenate([first[e : e + 1], g]) for e, g in enumerate(grouped)]
 
 
-def score(rollouts: Rollouts, reference: Any) -> dict[str, float]:
+def score(rollouts: Rollouts, reference: Any, per_episode: bool = False) -> dict[str, Any]:
     """AER, ``P`` (per episode against its own references, then averaged) and success rate.
 
     Args:
         rollouts: The episodes.
         reference: A :class:`abco_data.ReferenceReturns` (per layout for mazes).
+        per_episode: Also list every episode's return and ``P`` (``episode_returns``,
+            ``episode_performance``), for confidence intervals over episodes.
     """
     if rollouts.layout_ids is not None and reference.layout_ids is not None:
         where = {lid: i for i, lid in enumerate(reference.layout_ids)}
@@ -225,6 +227,9 @@ def score(rollouts: Rollouts, reference: Any) -> dict[str, float]:
         random = np.asarray(reference.random_per_layout)[idx]
     else:
         expert, random = reference.expert_mean, reference.random_mean
-    out = summarize(rollouts.returns, rollouts.successes, expert, random)
+    out: dict[str, Any] = summarize(rollouts.returns, rollouts.successes, expert, random)
     out["mean_length"] = float(rollouts.lengths.mean())
+    if per_episode:
+        out["episode_returns"] = np.asarray(rollouts.returns, dtype=np.float64).tolist()
+        out["episode_performance"] = performance(rollouts.returns, expert, random).tolist()
     return out

@@ -164,7 +164,7 @@ def final_evaluation(
                        **_eval_kwargs(cfg, data, "train" if split == "episodes" else split,
                                       FINAL_SEED))  # fmt: skip
         key = split if not maze else f"{split}/{protocol}"
-        results[key] = score(roll, data.reference)
+        results[key] = score(roll, data.reference, per_episode=True)
         if cfg.plots and maze and protocol == cfg.protocol and roll.paths is not None:
             k = min(cfg.plot_layouts, len(roll.paths))
             if k:
