@@ -20,6 +20,9 @@ from collections.abc import Sequence
 from dataclasses import MISSING, fields
 from typing import Any
 
+import abco_envs
+from abco_data.errors import DatasetError
+
 __all__ = ["build_parser", "main"]
 
 _HELP = {
@@ -86,8 +89,17 @@ def _run_train(args: argparse.Namespace) -> int:
         print(f"error: unknown method {values['method']!r}; registered: "
               f"{', '.join(available())}", file=sys.stderr)  # fmt: skip
         return 2
+    known_envs = (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
+    if values["env"] not in known_envs:
+        print(f"error: unknown env id {values['env']!r}; abco trains on: "
+              f"{', '.join(known_envs)}", file=sys.stderr)  # fmt: skip
+        return 2
     config = Config(**values)
-    final = train(config)
+    try:
+        final = train(config)
+    except DatasetError as err:  # a bad dataset file or id: the message names it
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     if final is not None:
         print(format_table(final))
         print(f"run folder: {config.resolved().run_dir}")

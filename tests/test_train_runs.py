@@ -214,3 +214,16 @@ def test_a_plugged_in_method_is_trained_and_evaluated_by_the_harness(tiny_data, 
     rows = [json.loads(x) for x in (tmp_path / "c" / "metrics.jsonl").read_text().splitlines()]
     assert len(rows) == 2 and rows[-1]["post"]["seen"] == 4
     assert final["episodes"]["episodes"] == 2
+
+
+def test_cli_reports_bad_input_without_a_traceback(tmp_path, capsys):
+    from abco_train.cli import main
+
+    assert main(["train", "--env", "Nope-v0", "--quiet"]) == 2
+    assert "unknown env id 'Nope-v0'" in capsys.readouterr().err
+    bad = tmp_path / "bad.hdf5"
+    bad.write_bytes(b"not an hdf5 file")
+    code = main(["train", "--env", "CartPole-v1", "--expert-data", str(bad), "--quiet",
+                 "--run-dir", str(tmp_path / "run")])
+    err = capsys.readouterr().err
+    assert code == 2 and str(bad) in err and "corrupt" in err
