@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from abco_data.format import FORMAT_NAME, FORMAT_VERSION, DatasetWriter, space_to_json, to_json
+from abco_data.manifest import default_cache_dir
 from abco_data.reference import ReferenceReturns, classic_reference, maze_reference
 from abco_data.registry import DatasetSpec, spec
 
@@ -30,8 +31,7 @@ GENERATOR_VERSION = 1
 
 def data_home() -> Path:
     """The dataset cache: ``$ABCO_DATA_HOME`` or ``~/.cache/abco/datasets``."""
-    env = os.environ.get("ABCO_DATA_HOME")
-    return Path(env) if env else Path.home() / ".cache" / "abco" / "datasets"
+    return default_cache_dir()
 
 
 def reference_for(s: DatasetSpec) -> ReferenceReturns:
