@@ -1,7 +1,8 @@
 """ABCO(alpha) and its baselines in one file (Monteiro, Gavenski et al., IJCNN 2020).
 
 Algorithm 1 of the paper, top to bottom (:meth:`ABCO.train_iteration` then
-:meth:`ABCO.observe`, called by the harness in :mod:`abco_train.train` for ``i = 0..alpha``):
+:meth:`ABCO.observe`, called by the harness in :mod:`abco_train.train` for ``i = 0..alpha``;
+the harness also owns seeding, the datasets and the run folder):
 
 1. ``I_s = I_pre`` (random-policy transitions with true actions).
 2. Train the IDM on ``I_s`` (cross-entropy, Adam); label every expert pair ``(s_t, s_t+1)``
@@ -33,22 +34,21 @@ attention), ``abco-whole`` (attention + whole sampling).
 
 from __future__ import annotations
 
-import json
-import random
-from dataclasses import asdict, dataclass, field, fields
-from pathlib import Path
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
-from abco_train.evaluate import Rollouts, is_maze
+from abco_train.config import RunConfig
+from abco_train.data import TrainingData
+from abco_train.evaluate import Rollouts
 from abco_train.methods import Method, register
 from abco_train.nets import build_networks
 from abco_train.sampling import sample_training_set
 
-__all__ = ["Config", "VARIANTS", "ABCO", "TrainingData", "load_training_data", "seed_everything"]
+__all__ = ["VARIANTS", "ABCO"]
 
 #: Method switches: (train the IDM, attention, how I_s is built after iteration 0).
 #: ``idm_data``: "pre" = I_pre only (BCO(0)), "pos" = all post-demonstrations (BCO(alpha)),
@@ -63,183 +63,6 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "sampling-whole": {"attention": False, "idm_data": "whole", "iterative": True},
     "abco-whole": {"attention": True, "idm_data": "whole", "iterative": True},
 }
-
-
-@dataclass
-class Config:
-    """Every setting of a run; ``None`` means "the default for this env and preset".
-
-    Attributes:
-        env: Gymnasium id of one of the six environments.
-        method: A registered method (:func:`abco_train.methods.available`).
-        seed: Seed of everything (same seed, same CPU run).
-        preset: ``cpu`` (compact CNN on images) or ``paper`` (the paper's ResNet-18).
-        iterations: ``alpha``: iterations ``0..alpha`` run (iterative variants only).
-        arch: ``mlp``, ``cnn`` or ``resnet18``.
-        attention: Override the method's attention switch.
-        idm_epochs: Epochs over ``I_s`` per iteration.
-        policy_epochs: Epochs over the expert data per iteration.
-        first_epochs_factor: Iteration 0 trains both nets this many times longer.
-        batch_size: Minibatch size.
-        lr: Adam learning rate of both nets.
-        idm_samples: Cap on ``N = |I_s|`` (default ``|I_pre|``).
-        pre_transitions: Use at most this many pre-demonstration transitions.
-        expert_episodes: Use at most this many expert episodes.
-        eval_episodes: Classic control: episodes per evaluation (mazes: every layout).
-        eval_layouts: Mazes: evaluate the first k layouts only (tests).
-        protocol: Maze evaluation protocol, ``paper`` or ``standard``.
-        eval_max_steps: Cap on evaluation episode length (default: the env's limit).
-        expert_data: Expert dataset id or file (default: the env's ``expert`` dataset).
-        pre_data: Pre-demonstration dataset id or file.
-        cache_dir: abco dataset cache.
-        run_dir: Run folder (default ``runs/{env}-{method}-s{seed}``).
-        threads: ``torch.set_num_threads``.
-        deterministic: ``torch.use_deterministic_algorithms``.
-        quiet: No progress bars.
-        plot_layouts: Mazes: layouts whose paths are drawn.
-        plots: Draw the figures at the end.
-    """
-
-    env: str = "AbcoMaze5x5-v0"
-    method: str = "abco"
-    seed: int = 0
-    preset: str = "cpu"
-    iterations: int | None = None
-    arch: str | None = None
-    attention: bool | None = None
-    idm_epochs: int | None = None
-    policy_epochs: int | None = None
-    first_epochs_factor: int | None = None
-    batch_size: int | None = None
-    lr: float | None = None
-    idm_samples: int | None = None
-    pre_transitions: int | None = None
-    expert_episodes: int | None = None
-    eval_episodes: int | None = None
-    eval_layouts: int | None = None
-    protocol: str = "paper"
-    eval_max_steps: int | None = None
-    expert_data: str | None = None
-    pre_data: str | None = None
-    cache_dir: str | None = None
-    run_dir: str | None = None
-    threads: int = 2
-    deterministic: bool = True
-    quiet: bool = False
-    plot_layouts: int = 4
-    plots: bool = True
-    method_options: dict[str, Any] = field(default_factory=dict)
-
-    def resolved(self) -> Config:
-        """A copy with every ``None`` default filled in for its env and preset."""
-        maze = is_maze(self.env)
-        image = maze  # the mazes' datasets are 64x64 RGB
-        paper = self.preset == "paper"
-        base: dict[str, Any] = {
-            "iterations": 2,
-            "arch": ("resnet18" if paper else "cnn") if image else "mlp",
-            "idm_epochs": 1 if image else 2,
-            "policy_epochs": 3 if image else 4,
-            "first_epochs_factor": 3 if image else 2,
-            "batch_size": 64 if image else 512,
-            "lr": 1e-3 if image else 3e-3,
-            "idm_samples": 20_000 if image else 50_000,
-            "pre_transitions": None,
-            "expert_episodes": None,
-            "eval_episodes": None if maze else 100,
-            "eval_layouts": None,
-        }
-        if self.env.startswith("AbcoMaze10x10"):  # small cells: both nets need longer
-            base.update(idm_epochs=2, policy_epochs=10)
-        if paper:
-            base.update(batch_size=32, lr=1e-4 if image else 1e-3)
-        values = asdict(self)
-        for key, default in base.items():
-            if values[key] is None:
-                values[key] = default
-        if values["attention"] is None:
-            values["attention"] = VARIANTS.get(self.method, {}).get("attention", True)
-        if values["run_dir"] is None:
-            values["run_dir"] = str(Path("runs") / f"{self.env}-{self.method}-s{self.seed}")
-        return Config(**values)
-
-    def to_json(self) -> str:
-        """The config as JSON."""
-        return json.dumps(asdict(self), indent=2, sort_keys=True)
-
-    @classmethod
-    def field_names(cls) -> list[str]:
-        """Names of the settings."""
-        return [f.name for f in fields(cls)]
-
-
-def seed_everything(seed: int, threads: int = 2, deterministic: bool = True) -> np.random.Generator:
-    """Seed python and torch, return the run's numpy Generator (the only numpy randomness);
-    make torch's CPU kernels deterministic where cheap."""
-    random.seed(seed)
-    torch.manual_seed(seed)
-    torch.set_num_threads(threads)
-    torch.set_flush_denormal(True)
-    torch.use_deterministic_algorithms(deterministic, warn_only=True)
-    return np.random.default_rng(seed)
-
-
-@dataclass
-class TrainingData:
-    """The datasets of a run, in memory.
-
-    ``pre_*`` are the pre-demonstrations (true actions); ``expert_*`` the expert's states
-    (``expert_eval_actions`` only measures IDM accuracy and trains ``bc``).
-    """
-
-    env_id: str
-    env_kwargs: dict[str, Any]
-    observation_space: Any
-    n_actions: int
-    reference: Any
-    pre_obs: np.ndarray
-    pre_t: np.ndarray
-    pre_actions: np.ndarray
-    expert_obs: np.ndarray
-    expert_t: np.ndarray
-    expert_eval_actions: np.ndarray
-
-
-def _open(ref: str | None, env_id: str, kind: str, config: Config) -> Any:
-    """A dataset from a file path, or by id through ``abco_data.load`` (cache/Hub/generate)."""
-    import abco_data
-
-    if ref is not None and Path(ref).is_file():
-        return abco_data.open_dataset(ref)
-    dataset_id = ref or abco_data.dataset_id(env_id, kind)
-    return abco_data.load(dataset_id, cache_dir=config.cache_dir, progress=not config.quiet)
-
-
-def load_training_data(config: Config) -> TrainingData:
-    """Load (download or generate if needed) and subsample the run's two datasets."""
-    expert = _open(config.expert_data, config.env, "expert", config)
-    pre = _open(config.pre_data, config.env, "pre_demonstrations", config)
-    arrays = {}
-    for name, ds, limit_key in (("pre", pre, None), ("expert", expert, "expert_episodes")):
-        a = ds.load_arrays()
-        obs_t, _ = ds.transition_index()
-        actions = ds.actions_of_transitions(idm_eval=True)
-        if limit_key and getattr(config, limit_key) is not None:
-            keep_eps = int(getattr(config, limit_key))
-            n_tr = int(a.episode_lengths[:keep_eps].sum())
-            obs_t, actions = obs_t[:n_tr], actions[:n_tr]
-        arrays[name] = (a.observations, obs_t, actions)
-    pre_obs, pre_t, pre_actions = arrays["pre"]
-    if config.pre_transitions is not None:
-        pre_t, pre_actions = pre_t[: config.pre_transitions], pre_actions[: config.pre_transitions]
-    kwargs = json.loads(expert.attrs.get("env_kwargs", "{}") or "{}")
-    return TrainingData(
-        env_id=config.env, env_kwargs=kwargs, observation_space=expert.observation_space,
-        n_actions=int(expert.action_space.n), reference=expert.reference,
-        pre_obs=pre_obs, pre_t=pre_t, pre_actions=pre_actions,
-        expert_obs=arrays["expert"][0], expert_t=arrays["expert"][1],
-        expert_eval_actions=arrays["expert"][2],
-    )  # fmt: skip
 
 
 def _fit(
@@ -291,8 +114,13 @@ def _predict(net: torch.nn.Module, inputs: Any, n: int, batch_size: int = 512) -
 class ABCO(Method):
     """ABCO(alpha) with the switches of :data:`VARIANTS` (see the module docstring)."""
 
-    def __init__(self, config: Config, data: TrainingData, rng: np.random.Generator) -> None:
-        self.config, self.data, self.rng = config, data, rng
+    @classmethod
+    def defaults(cls, name: str) -> Mapping[str, Any]:
+        """The variant's attention switch (``--attention`` overrides it)."""
+        return {"attention": VARIANTS[name]["attention"]}
+
+    def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
+        super().__init__(config, data, rng)
         variant = VARIANTS[config.method]
         self.idm_data, self.iterative = variant["idm_data"], variant["iterative"]
         # -- networks (mean/std of the states standardise vector inputs) ----------------------

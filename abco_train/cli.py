@@ -1,11 +1,17 @@
-"""The ``abco`` command: ``abco train ...`` and ``abco data ...``.
+"""The ``abco`` command: ``train``, ``bench``, ``report`` and ``data``.
 
-Every field of :class:`abco_train.abco.Config` is an option of ``abco train`` (``--idm-epochs
-3``, ``--no-attention``, ...); unset ones take the env's and preset's defaults.
+Every field of :class:`abco_train.config.RunConfig` is an option of ``abco train`` and an
+override of ``abco bench`` (``--idm-epochs 3``, ``--no-attention``, ...), generated from the
+config once (:func:`abco_train.config.add_config_options`); unset ones take the defaults of
+the env, preset and method.
+
+This module owns the exit codes: 0 success; 2 bad input (an option, a file, a dataset, a
+plugin), printed as one ``error: ...`` line; 1 a failed operation (a grid with failed cells,
+a disk error). Programming errors keep their traceback. Parsing the command line and
+``--help`` import neither torch nor the trainer.
 
 Example:
-    >>> parser = build_parser()
-    >>> args = parser.parse_args(["train", "--env", "CartPole-v1", "--idm-epochs", "3"])
+    >>> args = build_parser().parse_args(["train", "--env", "CartPole-v1", "--idm-epochs", "3"])
     >>> args.env, args.idm_epochs, args.method
     ('CartPole-v1', 3, 'abco')
 """
@@ -13,104 +19,148 @@ Example:
 from __future__ import annotations
 
 import argparse
-import importlib
-import json
 import sys
-from collections.abc import Sequence
-from dataclasses import MISSING, fields
+from collections.abc import Callable, Sequence
 from typing import Any
 
-import abco_envs
+from abco_data.cli import add_subcommands as add_data_subcommands
 from abco_data.errors import DatasetError
+from abco_train import __version__
+from abco_train.config import ConfigError, add_config_options, config_from_args
 
 __all__ = ["build_parser", "main"]
 
-_HELP = {
-    "env": "environment id (AbcoMaze3x3/5x5/10x10-v0, CartPole-v1, Acrobot-v1, MountainCar-v0)",
-    "method": "method: bc, bco, bco-alpha, abco, attention, sampling-partial, sampling-whole,"
-    " abco-whole, or a plugged-in one",
-    "preset": "cpu (compact CNN for images, the default) or paper (the paper's ResNet-18)",
-    "iterations": "alpha: iterations 0..alpha are run",
-    "protocol": "maze evaluation protocol during training: paper (4th visit ends, -1) or standard",
-}
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    """Exceptions that mean bad input: printed as one line, exit code 2."""
+    from abco_train.backends import BackendError
+    from abco_train.methods import PluginError
+    from abco_train.report import ReportError
+    from abco_train.run_folder import RunFolderError
+
+    return ConfigError, DatasetError, PluginError, ReportError, BackendError, RunFolderError
 
 
-def _train_options(parser: argparse.ArgumentParser) -> None:
-    from abco_train.abco import Config
+# -- abco train ------------------------------------------------------------------------------
 
-    for f in fields(Config):
-        if f.name == "method_options":
-            continue
-        flag = "--" + f.name.replace("_", "-")
-        default = f.default if f.default is not MISSING else None
-        kind = str(f.type)
-        help_text = _HELP.get(f.name, f.name.replace("_", " "))
-        if kind.startswith("bool"):
-            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default,
-                                help=help_text)  # fmt: skip
-            continue
-        caster: Any = str
-        if kind.startswith("int"):
-            caster = int
-        elif kind.startswith("float"):
-            caster = float
-        parser.add_argument(flag, type=caster, default=default, help=help_text)
-    parser.add_argument("--method-options", type=json.loads, default={},
-                        help="JSON object of options for a plugged-in method")  # fmt: skip
-    parser.add_argument("--plugin", action="append", default=[], metavar="MODULE",
-                        help="import MODULE first (it may register more methods)")  # fmt: skip
+
+def _train(args: argparse.Namespace) -> int:
+    from abco_train.methods import load_plugins, resolve_config
+
+    load_plugins(args.plugin)
+    config = resolve_config(config_from_args(args))  # every option checked before any work
+    from abco_train.train import format_table, train
+
+    final = train(config)
+    if final is not None:
+        print(format_table(final))
+        print(f"run folder: {config.run_dir}")
+    return 0
+
+
+# -- abco bench ------------------------------------------------------------------------------
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from dataclasses import fields
+
+    from abco_train.config import RunConfig
+    from abco_train.grid import CELL_FIELDS, parse_list, parse_seeds, plan, run_grid
+
+    overrides = {f.name: getattr(args, f.name) for f in fields(RunConfig)
+                 if f.name not in CELL_FIELDS and getattr(args, f.name, None) is not None}
+    cells = plan(parse_list(args.envs), parse_list(args.methods), parse_seeds(args.seeds))
+    summary = run_grid(
+        cells, args.out, overrides=overrides, method_options=args.method_options,
+        plugins=args.plugin, backend=args.backend, jobs=args.jobs, threads=args.threads,
+        address=args.address, quiet=args.quiet,
+    )  # fmt: skip
+    return 1 if summary["failed"] else 0
+
+
+def _bench_options(parser: argparse.ArgumentParser) -> None:
+    from abco_train.backends import BACKENDS
+
+    parser.add_argument("--envs", required=True, help="comma-separated env ids")
+    parser.add_argument("--methods", required=True, help="comma-separated method names")
+    parser.add_argument("--seeds", default="0-4", help="seeds, e.g. 0-4 or 0,2,5 (default 0-4)")
+    parser.add_argument("--out", required=True, help="the grid's folder (RUNS_DIR)")
+    parser.add_argument("--jobs", type=_positive, default=None,
+                        help="cells at once (default: cores)")  # fmt: skip
+    parser.add_argument("--backend", choices=BACKENDS, default="local")
+    parser.add_argument("--address", default=None, help="Ray cluster address (ray backend)")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
+    group = parser.add_argument_group("trainer overrides (every cell; default: the trainer's)")
+    add_config_options(group, exclude=("env", "method", "seed", "run_dir", "quiet"),
+                       unset_defaults=True)  # fmt: skip
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+# -- abco report -----------------------------------------------------------------------------
+
+
+def _report(args: argparse.Namespace) -> int:
+    from abco_train.report import write_report
+
+    files = write_report(args.runs_dir, args.out, args.labels_env)
+    print(f"report: {files['report']}\ncsv: {files['csv']}")
+    return 0
+
+
+def _report_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("runs_dir", help="an `abco bench --out` folder")
+    parser.add_argument("--out", default=None, help="output folder (default RUNS_DIR/report)")
+    parser.add_argument("--labels-env", default="AbcoMaze5x5-v0",
+                        help="env of the IDM label-distribution plot (default the 5x5 maze)")
+
+
+# -- the parser and the entry point ------------------------------------------------------------
+
+
+def _subcommand(sub: Any, name: str, help: str, options: Callable[[Any], None],
+                func: Callable[[argparse.Namespace], int], plugins: bool = True) -> None:
+    parser = sub.add_parser(name, help=help, description=help, allow_abbrev=False)
+    options(parser)
+    if plugins:
+        parser.add_argument("--plugin", action="append", default=[], metavar="MODULE_OR_FILE",
+                            help="import a module or .py file first (it may register methods)")
+    parser.set_defaults(func=func)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``abco``: ``train``, ``bench``, ``report`` and ``data``."""
     parser = argparse.ArgumentParser(prog="abco", description="ABCO: imitation from observation")
+    parser.add_argument("--version", action="version", version=f"abco {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    train = sub.add_parser("train", help="train and evaluate a method on an environment")
-    _train_options(train)
-    from abco_data.cli import add_subcommands
-    from abco_train import bench, report
-
-    add_subcommands(sub)
-    bench.add_subcommands(sub)
-    report.add_subcommands(sub)
+    _subcommand(sub, "train", "train and evaluate a method on an environment",
+                add_config_options, _train)  # fmt: skip
+    _subcommand(sub, "bench", "run an (env, method, seed) grid of training runs under "
+                "OUT/{env}/{method}/seed{seed}; finished cells are skipped", _bench_options,
+                _bench)  # fmt: skip
+    _subcommand(sub, "report", "tables and plots of an abco bench grid", _report_options,
+                _report, plugins=False)  # fmt: skip
+    add_data_subcommands(sub)
     return parser
-
-
-def _run_train(args: argparse.Namespace) -> int:
-    from abco_train.abco import Config
-
-    for module in args.plugin:
-        importlib.import_module(module)
-    values = {f.name: getattr(args, f.name) for f in fields(Config)}
-    from abco_train.methods import available
-    from abco_train.train import format_table, train
-
-    if values["method"] not in available():
-        print(f"error: unknown method {values['method']!r}; registered: "
-              f"{', '.join(available())}", file=sys.stderr)  # fmt: skip
-        return 2
-    known_envs = (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
-    if values["env"] not in known_envs:
-        print(f"error: unknown env id {values['env']!r}; abco trains on: "
-              f"{', '.join(known_envs)}", file=sys.stderr)  # fmt: skip
-        return 2
-    config = Config(**values)
-    try:
-        final = train(config)
-    except DatasetError as err:  # a bad dataset file or id: the message names it
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    if final is not None:
-        print(format_table(final))
-        print(f"run folder: {config.resolved().run_dir}")
-    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``abco`` console script and ``python -m abco_train``."""
     args = build_parser().parse_args(argv)
-    if args.command == "train":
-        return _run_train(args)
-    from abco_data.cli import run
+    if args.command == "data":
+        from abco_data.cli import run
 
-    return run(args)
+        return run(args)
+    try:
+        return int(args.func(args))
+    except _user_errors() as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted; re-run the same command to resume", file=sys.stderr)
+        return 130

@@ -30,21 +30,17 @@ import gymnasium as gym
 import numpy as np
 
 import abco_envs
+from abco_train.config import PROTOCOLS, env_kind
 from abco_train.metrics import performance, summarize
 
-__all__ = ["PROTOCOLS", "Rollouts", "rollout", "score", "is_maze", "CARTPOLE_GOAL_STEPS"]
+__all__ = ["PROTOCOLS", "Rollouts", "rollout", "score", "CARTPOLE_GOAL_STEPS"]
 
-PROTOCOLS = ("standard", "paper")
+
 CARTPOLE_GOAL_STEPS = 195
 PAPER_MAX_VISITS = 4
 PAPER_FAIL_RETURN = -1.0
 
 ActFn = Callable[[np.ndarray], np.ndarray]
-
-
-def is_maze(env_id: str) -> bool:
-    """Whether ``env_id`` is one of the abco mazes."""
-    return env_id.split(":")[-1] in abco_envs.MAZE_IDS
 
 
 @dataclass
@@ -83,7 +79,7 @@ class Rollouts:
 
 def make_vector_env(env_id: str, num_envs: int, env_kwargs: dict[str, Any]) -> gym.vector.VectorEnv:
     """The vector env of ``num_envs`` slots (mazes: MazeVectorEnv; others: SyncVectorEnv)."""
-    if is_maze(env_id):
+    if env_kind(env_id) == "maze":
         return gym.make_vec(
             env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **env_kwargs
         )
@@ -119,7 +115,7 @@ def rollout(
     """
     if protocol not in PROTOCOLS:
         raise ValueError(f"unknown protocol {protocol!r}; expected one of {PROTOCOLS}")
-    maze = is_maze(env_id)
+    maze = env_kind(env_id) == "maze"
     kwargs = dict(env_kwargs or {})
     options: dict[str, Any] = {}
     if maze:

@@ -1,8 +1,9 @@
-"""The interface an imitation-from-observation method implements, and the method registry.
+"""The interface an imitation-from-observation method implements, the registry, the plugins.
 
 The harness (:func:`abco_train.train.train`) owns everything around a method: the datasets,
 seeding, the per-iteration evaluation (whose rollouts it hands back as post-demonstrations),
-metrics, checkpoints, plots and resuming. A method only learns and acts.
+metrics, checkpoints, plots and resuming. A method only learns and acts. The built-in methods
+(:mod:`abco_train.abco`) are registered the same way a user's are.
 
 To plug in another method, subclass :class:`Method` and register it::
 
@@ -10,27 +11,44 @@ To plug in another method, subclass :class:`Method` and register it::
 
     @register("my-ifo")
     class MyIfO(Method):
-        def __init__(self, config, data, rng): ...
         def train_iteration(self, iteration): ...   # -> dict of scalars to log
         def act(self, obs): ...                     # batched greedy actions
         def state_dict(self): ...
         def load_state_dict(self, state): ...
 
-then ``abco train --method my-ifo`` (after importing the module that registers it, e.g. with
-``--plugin my_package.my_module``) trains and evaluates it exactly like ABCO.
+then ``abco train --method my-ifo --plugin my_module.py`` (or ``--plugin my_package.module``)
+trains and evaluates it exactly like ABCO, and ``abco bench --plugin ...`` runs it in a grid.
 """
 
 from __future__ import annotations
 
+import importlib
+import importlib.util
+import sys
 from abc import ABC, abstractmethod
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-__all__ = ["Method", "register", "get_method", "available"]
+from abco_train.config import ConfigError, RunConfig
+from abco_train.data import TrainingData
+
+if TYPE_CHECKING:
+    from abco_train.evaluate import Rollouts
+
+__all__ = ["Method", "register", "get_method", "available", "load_plugins", "resolve_config",
+           "PluginError", "BUILTIN_MODULES"]  # fmt: skip
+
+#: Modules whose import registers the built-in methods (imported on first lookup).
+BUILTIN_MODULES = ("abco_train.abco",)
 
 _REGISTRY: dict[str, type[Method]] = {}
+
+
+class PluginError(ImportError):
+    """A ``--plugin`` that cannot be imported; the message names it and the reason."""
 
 
 class Method(ABC):
@@ -41,20 +59,25 @@ class Method(ABC):
     rollouts to :meth:`observe`.
 
     Args:
-        config: The run's :class:`abco_train.abco.Config` (resolved); method-specific options
-            go in ``config.method_options``.
-        data: The run's :class:`abco_train.abco.TrainingData` (expert states, pre-demos).
+        config: The run's resolved config; method-specific options are in
+            ``config.method_options``.
+        data: The run's datasets (expert states, pre-demonstrations, reference returns).
         rng: The run's seeded numpy generator; draw all randomness from it (and from torch,
             seeded by the harness) so that a seed fixes the run.
     """
 
-    def __init__(self, config: Any, data: Any, rng: np.random.Generator) -> None:
+    def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
         self.config, self.data, self.rng = config, data, rng
+
+    @classmethod
+    def defaults(cls, name: str) -> Mapping[str, Any]:
+        """Config defaults of the method registered as ``name`` (over the env's; none here)."""
+        return {}
 
     @property
     def num_iterations(self) -> int:
         """How many iterations the harness runs (default: ``config.iterations + 1``)."""
-        return int(self.config.iterations) + 1
+        return int(self.config.iterations or 0) + 1
 
     @abstractmethod
     def train_iteration(self, iteration: int) -> dict[str, float]:
@@ -64,8 +87,8 @@ class Method(ABC):
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Greedy actions for a batch of observations (one call per environment step)."""
 
-    def observe(self, iteration: int, rollouts: Any) -> dict[str, float]:
-        """Take the post-demonstrations (a ``Rollouts``) of ``iteration``."""
+    def observe(self, iteration: int, rollouts: Rollouts) -> dict[str, float]:
+        """Take the post-demonstrations of ``iteration`` (every evaluation run, recorded)."""
         return {}
 
     def expert_labels(self) -> np.ndarray | None:
@@ -92,21 +115,71 @@ def register(*names: str) -> Callable[[type[Method]], type[Method]]:
     return decorate
 
 
+def _builtins() -> None:
+    for module in BUILTIN_MODULES:
+        importlib.import_module(module)
+
+
 def get_method(name: str) -> type[Method]:
     """The class registered as ``name``.
 
     Raises:
-        KeyError: Unknown name (the message lists the registered ones).
+        ConfigError: Unknown name (the message lists the registered ones).
     """
-    import abco_train.abco  # noqa: F401  (registers the built-in variants)
-
+    _builtins()
     if name not in _REGISTRY:
-        raise KeyError(f"unknown method {name!r}; registered: {', '.join(available())}")
+        raise ConfigError(f"unknown method {name!r}; registered: {', '.join(available())}"
+                          " (a --plugin may register more)")  # fmt: skip
     return _REGISTRY[name]
 
 
 def available() -> tuple[str, ...]:
     """Registered method names."""
-    import abco_train.abco  # noqa: F401
-
+    _builtins()
     return tuple(_REGISTRY)
+
+
+def resolve_config(config: RunConfig) -> RunConfig:
+    """``config`` validated, with every default filled in, the method's own included.
+
+    Raises:
+        ConfigError: A bad setting, unknown env or unknown method.
+    """
+    config.validate()
+    return config.resolved(get_method(config.method).defaults(config.method)).validate()
+
+
+def load_plugins(plugins: Sequence[str]) -> None:
+    """Import each plugin: a ``.py`` file path or a module name (``my_pkg.my_method``).
+
+    Importing a plugin registers its methods (:func:`register`). A file is imported once, as
+    module ``abco_plugin_{stem}``.
+
+    Raises:
+        PluginError: A missing file or module, or one that fails to import (the message
+            names it and the reason; the original exception is chained).
+    """
+    for plugin in plugins:
+        if plugin.endswith(".py") or Path(plugin).is_file():
+            path = Path(plugin).resolve()
+            if not path.is_file():
+                raise PluginError(f"plugin file {plugin} does not exist")
+            name = f"abco_plugin_{path.stem}"
+            if name in sys.modules:
+                continue
+            spec = importlib.util.spec_from_file_location(name, path)
+            if spec is None or spec.loader is None:
+                raise PluginError(f"cannot import plugin file {plugin}")
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[name] = module
+            try:
+                spec.loader.exec_module(module)
+            except Exception as exc:
+                del sys.modules[name]
+                raise PluginError(f"plugin {plugin} failed to import: "
+                                  f"{type(exc).__name__}: {exc}") from exc  # fmt: skip
+        else:
+            try:
+                importlib.import_module(plugin)
+            except ModuleNotFoundError as exc:
+                raise PluginError(f"plugin module {plugin!r} not found ({exc})") from exc

@@ -3,7 +3,7 @@
 Writes ``report.md``, ``results.csv`` (the same numbers, one row per statistic) and two plots
 into ``--out`` (default ``RUNS_DIR/report``). Numbers come from every
 ``RUNS_DIR/{env}/{method}/seed{seed}/final.json``; wall times, reference returns and failures
-from ``results.jsonl`` and ``bench_log.jsonl`` (:mod:`abco_train.bench`).
+from ``results.jsonl`` and ``bench_log.jsonl`` (:mod:`abco_train.grid`).
 
 Statistics (mean, IQM, bootstrap intervals) are :mod:`abco_train.stats`; the published
 numbers :mod:`abco_train.paper`.
@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import csv
 import json
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,15 +24,18 @@ from typing import Any
 
 import numpy as np
 
+import abco_envs
+from abco_train.config import env_kind
+from abco_train.grid import read_results
 from abco_train.paper import PAPER_TABLE1, PAPER_TABLE2
 from abco_train.stats import CellStats, cell_stats
 
 __all__ = [
     "TABLE1_ENVS", "TABLE1_METHODS", "TABLE2_METHODS", "GOALS", "Run", "load_runs",
-    "write_report", "add_subcommands", "build_parser", "main",
+    "write_report", "table_evaluation", "ReportError",
 ]  # fmt: skip
 
-MAZES = ("AbcoMaze3x3-v0", "AbcoMaze5x5-v0", "AbcoMaze10x10-v0")
+MAZES = abco_envs.MAZE_IDS
 TABLE1_ENVS = ("CartPole-v1", "Acrobot-v1", "MountainCar-v0", *MAZES)
 #: Table 1 rows -> the trainer's methods (abco_train.abco.VARIANTS).
 TABLE1_METHODS = {"bc": "BC", "bco-alpha": "BCO(α)", "abco": "ABCO(α)"}
@@ -53,7 +55,11 @@ GOALS = {"aer": {e: PAPER_TABLE1["abco"][e][1] for e in TABLE1_ENVS}, "performan
 
 def table_evaluation(env: str, split: str = "train") -> str:
     """The ``final.json`` key of a table's numbers: mazes ``{split}/paper``, else ``episodes``."""
-    return f"{split}/paper" if env in MAZES or env.startswith("AbcoMaze") else "episodes"
+    return f"{split}/paper" if env_kind(env) == "maze" else "episodes"
+
+
+class ReportError(ValueError):
+    """The folder holds nothing to report on; the message names it."""
 
 
 # -- the runs -------------------------------------------------------------------------------
@@ -88,8 +94,6 @@ class Run:
 
 def load_runs(runs_dir: str | Path) -> list[Run]:
     """Every run folder ``{env}/{method}/seed{seed}`` under ``runs_dir`` (finished or not)."""
-    from abco_train.bench import read_results
-
     runs_dir = Path(runs_dir)
     rows = read_results(runs_dir)
     runs = []
@@ -408,11 +412,20 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
 
     Returns:
         The written files by name (``report``, ``csv``, and the plots that had data).
+
+    Raises:
+        ReportError: ``runs_dir`` is not a folder, or holds no run folders.
     """
     runs_dir = Path(runs_dir)
+    if not runs_dir.is_dir():
+        raise ReportError(f"no such folder {runs_dir}")
+    runs = load_runs(runs_dir)
+    if not runs:
+        raise ReportError(f"{runs_dir} holds no run folders ({{env}}/{{method}}/seed{{n}}); "
+                          "is it an `abco bench --out` folder?")  # fmt: skip
     out = Path(out) if out is not None else runs_dir / "report"
     out.mkdir(parents=True, exist_ok=True)
-    grid = _Grid(load_runs(runs_dir))
+    grid = _Grid(runs)
     csv_rows: list[dict[str, Any]] = []
     wall, wall_lines = _wall(runs_dir, grid)
     t1 = [(e, m, label, PAPER_TABLE1[m][e]) for e in TABLE1_ENVS
@@ -467,47 +480,3 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
         writer.writeheader()
         writer.writerows(csv_rows)
     return files
-
-
-# -- command line ---------------------------------------------------------------------------
-
-
-def _configure(parser: Any) -> None:
-    parser.add_argument("runs_dir", help="an `abco bench --out` folder")
-    parser.add_argument("--out", default=None, help="output folder (default RUNS_DIR/report)")
-    parser.add_argument("--labels-env", default=TABLE2_ENV,
-                        help="env of the IDM label-distribution plot (default the 5x5 maze)")
-    parser.set_defaults(func=_run)
-
-
-def _run(args: Any) -> int:
-    if not Path(args.runs_dir).is_dir():
-        print(f"error: no such folder {args.runs_dir}", file=sys.stderr)
-        return 2
-    files = write_report(args.runs_dir, args.out, args.labels_env)
-    print(f"report: {files['report']}\ncsv: {files['csv']}")
-    return 0
-
-
-def add_subcommands(subparsers: Any) -> None:
-    """Mount ``report`` on ``abco``'s subparsers (its action is ``args.func(args)``)."""
-    _configure(subparsers.add_parser("report", help="tables and plots of an abco bench grid"))
-
-
-def build_parser() -> Any:
-    """A stand-alone parser of ``abco report`` (without the ``report`` word)."""
-    import argparse
-
-    parser = argparse.ArgumentParser(prog="abco report")
-    _configure(parser)
-    return parser
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``abco report ...`` (``argv`` without the ``report`` word)."""
-    args = build_parser().parse_args(argv)
-    return int(args.func(args))
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,14 +1,8 @@
-"""The harness: datasets, iterations, evaluation, run folder, checkpoints, resuming, plots.
+"""The harness: seeding, datasets, iterations, evaluation, checkpoints, resuming, plots.
 
-A run folder holds::
-
-    config.json        the resolved config
-    metrics.jsonl      one line per iteration: training stats, evaluation, I_s composition,
-                       the IDM's label distribution on the expert data, seconds
-    checkpoint.pt      the latest iteration's full state (method, rngs); re-running the same
-                       command resumes after it
-    final.json         the final evaluation (mazes: train and test splits, both protocols)
-    metrics.png, labels.png, paths_{split}.png   the plots
+It writes the run folder described in :mod:`abco_train.run_folder`. Re-running a finished
+run's command prints its stored result at once; re-running an interrupted one resumes after
+its last checkpoint.
 
 Evaluation episodes: mazes, every layout of the split (``eval_layouts`` limits that for
 tests); classic control, ``eval_episodes`` episodes with seeds ``EVAL_SEED + 1000 * seed + i``
@@ -19,47 +13,55 @@ training).
 from __future__ import annotations
 
 import json
-import os
+import random
 import time
-from dataclasses import asdict, replace
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
-from abco_train.abco import Config, load_training_data, seed_everything
+from abco_train.config import RunConfig, comparable
+from abco_train.data import TrainingData, load_training_data
 from abco_train.evaluate import rollout, score
-from abco_train.methods import get_method
+from abco_train.methods import Method, get_method, resolve_config
+from abco_train.run_folder import (
+    CHECKPOINT,
+    CONFIG,
+    FINAL,
+    METRICS,
+    RunFolderError,
+    finished_result,
+    write_atomic,
+)
 
-__all__ = ["train", "final_evaluation", "format_table", "EVAL_SEED", "FINAL_SEED"]
+__all__ = ["train", "final_evaluation", "format_table", "seed_everything", "RunFolderError",
+           "EVAL_SEED", "FINAL_SEED"]  # fmt: skip
 
 EVAL_SEED = 100_000_000
 FINAL_SEED = 200_000_000
-#: Settings that may change between a run and its resumption.
-_RUNTIME_KEYS = ("quiet", "run_dir", "cache_dir", "threads", "expert_data", "pre_data", "plots",
-                 "plot_layouts")
 
 
-def _comparable(cfg: dict[str, Any]) -> dict[str, Any]:
-    return {k: v for k, v in cfg.items() if k not in _RUNTIME_KEYS}
+def seed_everything(seed: int, threads: int = 2, deterministic: bool = True) -> np.random.Generator:
+    """Seed python and torch, return the run's numpy Generator (the only numpy randomness);
+    make torch's CPU kernels deterministic where cheap."""
+    random.seed(seed)
+    torch.manual_seed(seed)
+    torch.set_num_threads(threads)
+    torch.set_flush_denormal(True)
+    torch.use_deterministic_algorithms(deterministic, warn_only=True)
+    return np.random.default_rng(seed)
 
 
-def _eval_kwargs(cfg: Config, data: Any, split: str, seed: int) -> dict[str, Any]:
-    maze = data.reference.layout_ids is not None
+def _eval_kwargs(cfg: RunConfig, data: TrainingData, split: str, seed: int) -> dict[str, Any]:
     return {
-        "episodes": cfg.eval_layouts if maze else cfg.eval_episodes,
+        "episodes": cfg.eval_layouts if data.is_maze else cfg.eval_episodes,
         "split": split,
         "env_kwargs": data.env_kwargs,
         "seed": seed + 1000 * cfg.seed,
         "max_steps": cfg.eval_max_steps,
     }
-
-
-def _save_checkpoint(path: Path, payload: dict[str, Any]) -> None:
-    tmp = path.with_suffix(".tmp")
-    torch.save(payload, tmp)
-    os.replace(tmp, path)
 
 
 def _label_distribution(labels: np.ndarray | None, n_actions: int) -> list[float] | None:
@@ -68,7 +70,7 @@ def _label_distribution(labels: np.ndarray | None, n_actions: int) -> list[float
     return (np.bincount(labels, minlength=n_actions) / len(labels)).tolist()
 
 
-def train(config: Config, *, stop_after: int | None = None) -> dict[str, Any] | None:
+def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any] | None:
     """Train ``config.method`` on ``config.env``, writing (or resuming) its run folder.
 
     Args:
@@ -80,20 +82,24 @@ def train(config: Config, *, stop_after: int | None = None) -> dict[str, Any] | 
         The final evaluation (``final.json``), or ``None`` when stopped early.
 
     Raises:
-        ValueError: The run folder holds a checkpoint of a different config.
+        ConfigError: A bad setting, env or method.
+        RunFolderError: The run folder holds a checkpoint of a different config.
     """
     from tqdm.auto import tqdm
 
-    cfg = config.resolved()
+    cfg = resolve_config(config)
     run_dir = Path(cfg.run_dir)
+    stored = finished_result(run_dir, asdict(cfg))
+    if stored is not None:
+        return stored
     run_dir.mkdir(parents=True, exist_ok=True)
-    ckpt_path, metrics_path = run_dir / "checkpoint.pt", run_dir / "metrics.jsonl"
-    state = torch.load(ckpt_path, weights_only=False) if ckpt_path.exists() else None
-    if state is not None and _comparable(state["config"]) != _comparable(asdict(cfg)):
-        raise ValueError(
+    ckpt_path, metrics_path = run_dir / CHECKPOINT, run_dir / METRICS
+    state = _load_checkpoint(ckpt_path)
+    if state is not None and comparable(state["config"]) != comparable(asdict(cfg)):
+        raise RunFolderError(
             f"{run_dir} holds a run of another config; use another --run-dir or delete it"
         )
-    (run_dir / "config.json").write_text(cfg.to_json())
+    write_atomic(run_dir / CONFIG, cfg.to_json())
 
     # -- seeding, data, method --------------------------------------------------------------
     rng = seed_everything(cfg.seed, cfg.threads, cfg.deterministic)
@@ -105,10 +111,8 @@ def train(config: Config, *, stop_after: int | None = None) -> dict[str, Any] | 
         method.load_state_dict(state["method"])
         torch.set_rng_state(state["torch_rng"])
         start = int(state["iteration"]) + 1
-        if metrics_path.exists():
-            lines = metrics_path.read_text().splitlines()
-            history = [r for r in map(json.loads, lines) if r["iteration"] < start]
-    metrics_path.write_text("".join(json.dumps(r) + "\n" for r in history))
+        history = _read_history(metrics_path, start)
+    write_atomic(metrics_path, "".join(json.dumps(r) + "\n" for r in history))
 
     # -- iterations -----------------------------------------------------------------------------
     total = method.num_iterations
@@ -130,10 +134,9 @@ def train(config: Config, *, stop_after: int | None = None) -> dict[str, Any] | 
         history.append(record)
         with metrics_path.open("a") as f:
             f.write(json.dumps(record) + "\n")
-        _save_checkpoint(ckpt_path, {
-            "iteration": i, "method": method.state_dict(), "torch_rng": torch.get_rng_state(),
-            "config": asdict(cfg),
-        })  # fmt: skip
+        payload = {"iteration": i, "method": method.state_dict(),
+                   "torch_rng": torch.get_rng_state(), "config": asdict(cfg)}  # fmt: skip
+        write_atomic(ckpt_path, lambda tmp, payload=payload: torch.save(payload, tmp))
         bar.set_postfix(P=f"{evaluation['performance']:.3f}",
                         win=f"{evaluation['success_rate']:.2f}")  # fmt: skip
         if stop_after is not None and i + 1 >= stop_after and i + 1 < total:
@@ -142,17 +145,49 @@ def train(config: Config, *, stop_after: int | None = None) -> dict[str, Any] | 
     bar.close()
 
     final = final_evaluation(cfg, data, method, history, run_dir)
-    (run_dir / "final.json").write_text(json.dumps(final, indent=2))
+    write_atomic(run_dir / FINAL, json.dumps(final, indent=2))
     return final
 
 
+def _load_checkpoint(path: Path) -> dict[str, Any] | None:
+    """The checkpoint's state, ``None`` without one.
+
+    Raises:
+        RunFolderError: The checkpoint is damaged (e.g. truncated).
+    """
+    if not path.exists():
+        return None
+    try:
+        return torch.load(path, weights_only=False)
+    except (RuntimeError, EOFError, OSError, ValueError) as exc:
+        raise RunFolderError(f"{path} is damaged ({type(exc).__name__}: {exc}); delete it to "
+                             "restart the run") from None  # fmt: skip
+
+
+def _read_history(path: Path, start: int) -> list[dict[str, Any]]:
+    """The metrics of iterations before ``start``; a damaged last line is dropped (the
+    iteration it belonged to is re-run from its checkpoint only if the checkpoint is older)."""
+    if not path.exists():
+        return []
+    history = []
+    for line in path.read_text().splitlines():
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # a line cut short by a kill; its iteration is in the checkpoint or redone
+        if isinstance(record, dict) and record.get("iteration", start) < start:
+            history.append(record)
+    return history
+
+
 def final_evaluation(
-    cfg: Config, data: Any, method: Any, history: list[dict[str, Any]], run_dir: Path
+    cfg: RunConfig, data: TrainingData, method: Method, history: list[dict[str, Any]],
+    run_dir: Path,
 ) -> dict[str, Any]:
     """Evaluate the final policy (mazes: both splits and protocols) and draw the plots."""
     from abco_train import plots
 
-    maze = data.reference.layout_ids is not None
+    maze = data.is_maze
     results: dict[str, Any] = {"env": cfg.env, "method": cfg.method, "seed": cfg.seed}
     settings = (
         [(s, p) for s in ("train", "test") for p in ("paper", "standard")] if maze else
@@ -193,7 +228,3 @@ def format_table(final: dict[str, Any]) -> str:
         lines.append(f"plot {name}: {path}")
     return "\n".join(lines)
 
-
-def config_with(config: Config, **changes: Any) -> Config:
-    """``config`` with some fields replaced (a convenience for scripts)."""
-    return replace(config, **changes)

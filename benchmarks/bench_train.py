@@ -22,7 +22,7 @@ from pathlib import Path
 
 import abco_data
 import abco_envs
-from abco_train.abco import Config
+from abco_train.config import RunConfig
 from abco_train.train import train
 
 #: env -> (minimum train P, maximum seconds)
@@ -60,7 +60,7 @@ def main() -> int:
         run_dir = Path(args.out) / f"{env}-{args.method}-s{args.seed}"
         shutil.rmtree(run_dir, ignore_errors=True)
         start = time.perf_counter()
-        final = train(Config(env=env, method=args.method, seed=args.seed, run_dir=str(run_dir),
+        final = train(RunConfig(env=env, method=args.method, seed=args.seed, run_dir=str(run_dir),
                              quiet=True, expert_data=files.get("expert"),
                              pre_data=files.get("pre_demonstrations")))  # fmt: skip
         seconds = time.perf_counter() - start

@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from abco_train.config import RunConfig
+from abco_train.data import TrainingData
 from abco_train.methods import Method, register
 
 
@@ -29,7 +31,7 @@ def _nearest(queries: np.ndarray, points: np.ndarray, chunk: int = 1024) -> np.n
 class NearestNeighbourIfO(Method):
     """BCO(0) with nearest-neighbour IDM and policy (option ``max_pre``: pre-demos used)."""
 
-    def __init__(self, config: Any, data: Any, rng: np.random.Generator) -> None:
+    def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
         super().__init__(config, data, rng)
         max_pre = int(config.method_options.get("max_pre", 5000))
         keep = rng.permutation(len(data.pre_t))[:max_pre]  # the run's seed picks the subset

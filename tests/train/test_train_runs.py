@@ -10,7 +10,8 @@ import pytest
 
 import abco_data
 import abco_envs
-from abco_train.abco import VARIANTS, Config
+from abco_train.abco import VARIANTS
+from abco_train.config import RunConfig
 from abco_train.evaluate import rollout, score
 from abco_train.train import train
 
@@ -45,7 +46,7 @@ def tiny_data(tmp_path_factory):
     return get
 
 
-def tiny_config(env_id, method, data, run_dir, **changes) -> Config:
+def tiny_config(env_id, method, data, run_dir, **changes) -> RunConfig:
     expert, pre = data(env_id)
     values = dict(
         env=env_id, method=method, seed=0, iterations=1, idm_epochs=1, policy_epochs=1,
@@ -54,7 +55,7 @@ def tiny_config(env_id, method, data, run_dir, **changes) -> Config:
         plots=False,
     )
     values.update(changes)
-    return Config(**values)
+    return RunConfig(**values)
 
 
 @pytest.mark.parametrize("env_id", ENVS)

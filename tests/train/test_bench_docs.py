@@ -9,9 +9,11 @@ from pathlib import Path
 import pytest
 from test_bench_grid import tiny_overrides
 
-from abco_train import bench, report
+from abco_train import grid as bench
+from abco_train.cli import build_parser
+from abco_train.cli import main as abco_main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "benchmarking.md"
 EXAMPLE = ROOT / "docs" / "examples" / "my_method.py"
 
@@ -32,8 +34,7 @@ def test_documented_method_is_the_example_file() -> None:
 def test_documented_commands_parse() -> None:
     for block in _blocks("bash"):
         for argv in _commands(block):
-            parser = {"bench": bench.build_parser, "report": report.build_parser}[argv[1]]()
-            parser.parse_args(argv[2:])
+            build_parser().parse_args(argv[1:])
 
 
 def test_user_method_beside_abco(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -43,13 +44,12 @@ def test_user_method_beside_abco(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     (tmp_path / "docs" / "examples" / "my_method.py").write_text(EXAMPLE.read_text())
     tiny = [f"--{k.replace('_', '-')}={v}" for k, v in overrides.items()]
     mine = [argv for argv in _commands(_blocks("bash")[-1])]
-    assert [argv[1] for argv in mine] == ["bench", "report"]
-    for argv in mine:
-        if argv[1] == "bench":  # fewer seeds and a tiny budget, else the command as written
+    assert [argv[1] for argv in mine] == ["train", "bench", "report"]
+    for argv in mine:  # the same plugin file through `abco train` and `abco bench`
+        if argv[1] in ("train", "bench"):  # fewer seeds, a tiny budget, else as written
             argv = [a if a != "0-4" else "0" for a in argv] + tiny + ["--quiet", "--threads=1"]
-            assert bench.main(argv[2:]) == 0
-        else:
-            assert report.main(argv[2:]) == 0
+        assert abco_main(argv[1:]) == 0
+    assert (tmp_path / "runs" / "knn" / "final.json").exists()
     md = (tmp_path / "runs" / "mine" / "report" / "report.md").read_text()
     assert "| CartPole-v1 | knn-ifo | 1 |" in md and "| CartPole-v1 | abco | 1 |" in md
     # the Python API block: the same grid, now all finished, then the report

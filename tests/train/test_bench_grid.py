@@ -10,7 +10,9 @@ from typing import Any
 import pytest
 
 import abco_data
-from abco_train import bench, paper, report
+from abco_train import grid as bench
+from abco_train import paper
+from abco_train.cli import main as abco_main
 
 TINY_TRAINING = {"iterations": 1, "idm_epochs": 1, "policy_epochs": 1, "eval_episodes": 3}
 
@@ -46,14 +48,14 @@ CELLS = bench.plan(["CartPole-v1"], ["bco-alpha", "abco"], [0, 1])
 @pytest.fixture(scope="module")
 def grid(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """The tiny grid, run once; one cell was interrupted beforehand (checkpoint, no final)."""
-    from abco_train.abco import Config
+    from abco_train.config import RunConfig
     from abco_train.train import train
 
     root = tmp_path_factory.mktemp("bench")
     overrides = tiny_overrides(root / "data")
     out = root / "runs"
     interrupted = bench.cell_config(CELLS[-1], out, overrides, threads=1)
-    assert train(Config(**interrupted), stop_after=1) is None
+    assert train(RunConfig(**interrupted), stop_after=1) is None
     summary = bench.run_grid(CELLS, out, overrides=overrides, jobs=2, threads=1, quiet=True)
     return {"out": out, "overrides": overrides, "summary": summary}
 
@@ -95,7 +97,7 @@ def test_rerun_skips_finished_cells(grid: dict[str, Any]) -> None:
     out = grid["out"]
     before = bench.read_results(out)
     mtimes = {c.key: (c.run_dir(out) / "final.json").stat().st_mtime_ns for c in CELLS}
-    code = bench.main([
+    code = abco_main(["bench",
         "--envs", "CartPole-v1", "--methods", "bco-alpha,abco", "--seeds", "0-1", "--out",
         str(out), "--quiet", "--threads", "1",
         *[f"--{k.replace('_', '-')}={v}" for k, v in grid["overrides"].items()],
@@ -119,7 +121,7 @@ def test_unknown_method_is_refused(tmp_path: Path) -> None:
 
 
 def test_report_from_grid(grid: dict[str, Any], tmp_path: Path) -> None:
-    assert report.main([str(grid["out"]), "--out", str(tmp_path), "--labels-env",
+    assert abco_main(["report", str(grid["out"]), "--out", str(tmp_path), "--labels-env",
                         "CartPole-v1"]) == 0  # fmt: skip
     md = (tmp_path / "report.md").read_text()
     for heading in ("## Table 1: train split", "## Table 1, mazes on the held-out test split",

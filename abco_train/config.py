@@ -1,0 +1,288 @@
+"""The run config: every setting of a training run, its defaults, its checks, its options.
+
+One :class:`RunConfig` describes a run. Fields left ``None`` take the default of the run's
+environment kind and preset from :data:`DEFAULTS` (a table you can read), then
+:data:`ENV_DEFAULTS` for single environments, then the method's own defaults
+(:meth:`abco_train.methods.Method.defaults`). :data:`RUNTIME_FIELDS` may change between a run
+and its resumption; every other field is part of the run's identity.
+
+The command lines of ``abco train`` and ``abco bench`` are both generated from the fields by
+:func:`add_config_options` (help text from each field's ``help`` metadata, choices and lower
+bounds from its ``choices``/``min`` metadata), so the two cannot drift apart.
+
+Importing this module imports neither torch nor gymnasium.
+
+Example:
+    >>> cfg = RunConfig(env="CartPole-v1").resolved()
+    >>> cfg.arch, cfg.batch_size, cfg.eval_episodes
+    ('mlp', 512, 100)
+    >>> RunConfig(env="AbcoMaze10x10-v0").resolved().policy_epochs
+    10
+    >>> RunConfig(batch_size=0).validate()
+    Traceback (most recent call last):
+    ...
+    abco_train.config.ConfigError: --batch-size must be >= 1, got 0
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import types
+import typing
+from collections.abc import Collection, Mapping
+from dataclasses import MISSING, asdict, dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import abco_envs
+
+__all__ = [
+    "RunConfig", "ConfigError", "DEFAULTS", "ENV_DEFAULTS", "RUNTIME_FIELDS", "PRESETS",
+    "PROTOCOLS", "ARCHS", "env_kind", "known_envs", "comparable",
+    "add_config_options", "config_from_args", "flag_of",
+]  # fmt: skip
+
+PRESETS = ("cpu", "paper")
+PROTOCOLS = ("paper", "standard")
+ARCHS = ("mlp", "cnn", "resnet18")
+
+
+class ConfigError(ValueError):
+    """A setting out of its range or choices; the message names the option and the value."""
+
+
+def env_kind(env_id: str) -> str:
+    """``"maze"`` for the abco mazes, ``"classic"`` for classic control (the defaults' key).
+
+    Raises:
+        ConfigError: ``env_id`` is none of the six environments abco trains on.
+    """
+    name = env_id.split(":")[-1]
+    if name in abco_envs.MAZE_IDS:
+        return "maze"
+    if name in abco_envs.CLASSIC_IDS:
+        return "classic"
+    raise ConfigError(f"unknown env id {env_id!r}; abco trains on: {', '.join(known_envs())}")
+
+
+def known_envs() -> tuple[str, ...]:
+    """The environments abco trains on."""
+    return (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
+
+
+def _opt(help: str, default: Any = None, **meta: Any) -> Any:
+    """A config field with its help text (and ``choices``/``min`` checks) as metadata."""
+    return field(default=default, metadata={"help": help, **meta})
+
+
+@dataclass
+class RunConfig:
+    """Every setting of a run; ``None`` means "the default for this env, preset and method".
+
+    The help of each field (``abco train --help``) is its ``help`` metadata.
+    """
+
+    env: str = _opt("environment id: AbcoMaze3x3/5x5/10x10-v0, CartPole-v1, Acrobot-v1, "
+                    "MountainCar-v0", "AbcoMaze5x5-v0")  # fmt: skip
+    method: str = _opt("a registered method: bc, bco, bco-alpha, abco, attention, "
+                       "sampling-partial, sampling-whole, abco-whole, or a plugin's", "abco")
+    seed: int = _opt("seed of everything (same seed, same CPU run)", 0, min=0)
+    preset: str = _opt("cpu (compact CNN on images) or paper (the paper's ResNet-18)", "cpu",
+                       choices=PRESETS)  # fmt: skip
+    iterations: int | None = _opt("alpha: iterations 0..alpha run (iterative methods)", min=0)
+    arch: str | None = _opt("network: mlp (vectors), cnn or resnet18 (images)", choices=ARCHS)
+    attention: bool | None = _opt("self-attention in both networks (default: the method's)")
+    idm_epochs: int | None = _opt("IDM epochs over I_s per iteration", min=1)
+    policy_epochs: int | None = _opt("policy epochs over the expert data per iteration", min=1)
+    first_epochs_factor: int | None = _opt("iteration 0 trains both nets this many times longer",
+                                           min=1)  # fmt: skip
+    batch_size: int | None = _opt("minibatch size", min=1)
+    lr: float | None = _opt("Adam learning rate of both networks", min=0.0, exclusive=True)
+    idm_samples: int | None = _opt("cap on N = |I_s| (default |I_pre|)", min=1)
+    pre_transitions: int | None = _opt("use at most this many pre-demonstration transitions",
+                                       min=1)  # fmt: skip
+    expert_episodes: int | None = _opt("use at most this many expert episodes", min=1)
+    eval_episodes: int | None = _opt("classic control: episodes per evaluation", min=1)
+    eval_layouts: int | None = _opt("mazes: evaluate the first k layouts only (tests)", min=1)
+    protocol: str = _opt("maze evaluation protocol while training: paper (4th visit of a cell "
+                         "ends, return -1) or standard", "paper", choices=PROTOCOLS)
+    eval_max_steps: int | None = _opt("cap on evaluation episode length (default: the env's)",
+                                      min=1)  # fmt: skip
+    expert_data: str | None = _opt("expert dataset id or HDF5 file (default: the env's)")
+    pre_data: str | None = _opt("pre-demonstration dataset id or HDF5 file (default: the env's)")
+    cache_dir: str | None = _opt("abco dataset cache (default $ABCO_DATA_HOME)")
+    run_dir: str | None = _opt("run folder (default runs/{env}-{method}-s{seed})")
+    threads: int = _opt("torch threads", 2, min=1)
+    deterministic: bool = _opt("deterministic torch kernels", True)
+    quiet: bool = _opt("no progress bars", False)
+    plot_layouts: int = _opt("mazes: layouts whose paths are drawn", 4, min=0)
+    plots: bool = _opt("draw the figures at the end", True)
+    method_options: dict[str, Any] = field(
+        default_factory=dict, metadata={"help": "JSON object of method-specific options"}
+    )
+
+    def resolved(self, method_defaults: Mapping[str, Any] | None = None) -> RunConfig:
+        """A copy with every ``None`` field filled in.
+
+        Order: :data:`DEFAULTS` of the env kind and preset, then :data:`ENV_DEFAULTS`, then
+        ``method_defaults`` (the method's own, :meth:`abco_train.methods.Method.defaults`);
+        fields set by the user always win.
+        """
+        key = (env_kind(self.env), self.preset)
+        if key not in DEFAULTS:
+            raise ConfigError(f"--preset must be one of {', '.join(PRESETS)}, got {self.preset!r}")
+        base = {**DEFAULTS[key], **ENV_DEFAULTS.get(self.env.split(":")[-1], {}),
+                **(method_defaults or {})}  # fmt: skip
+        values = asdict(self)
+        for name, default in base.items():
+            if values[name] is None:
+                values[name] = default
+        if values["run_dir"] is None:
+            values["run_dir"] = str(Path("runs") / f"{self.env}-{self.method}-s{self.seed}")
+        return RunConfig(**values)
+
+    def validate(self) -> RunConfig:
+        """Check every set field against its choices and lower bound; return ``self``.
+
+        Raises:
+            ConfigError: The first field out of range, named as its command-line option.
+        """
+        env_kind(self.env)
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if value is None:
+                continue
+            choices, low = f.metadata.get("choices"), f.metadata.get("min")
+            if choices is not None and value not in choices:
+                raise ConfigError(f"{flag_of(f.name)} must be one of {', '.join(choices)}, "
+                                  f"got {value!r}")  # fmt: skip
+            if low is not None:
+                exclusive = f.metadata.get("exclusive", False)
+                if value < low or (exclusive and value == low):
+                    sign = ">" if exclusive else ">="
+                    raise ConfigError(f"{flag_of(f.name)} must be {sign} {low}, got {value}")
+        if not isinstance(self.method_options, dict):
+            raise ConfigError(f"--method-options must be a JSON object, got "
+                              f"{self.method_options!r}")  # fmt: skip
+        return self
+
+    def to_json(self) -> str:
+        """The config as JSON (``config.json`` of a run folder)."""
+        return json.dumps(asdict(self), indent=2, sort_keys=True)
+
+    def replace(self, **changes: Any) -> RunConfig:
+        """A copy with some fields changed."""
+        return replace(self, **changes)
+
+
+#: Defaults of the ``None`` fields by (env kind, preset). Mazes train on 64x64 RGB frames,
+#: classic control on state vectors; ``paper`` is the paper's ResNet-18 and its optimiser.
+DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
+    ("maze", "cpu"): {
+        "iterations": 2, "arch": "cnn", "attention": True, "idm_epochs": 1, "policy_epochs": 3,
+        "first_epochs_factor": 3, "batch_size": 64, "lr": 1e-3, "idm_samples": 20_000,
+    },
+    ("maze", "paper"): {
+        "iterations": 2, "arch": "resnet18", "attention": True, "idm_epochs": 1,
+        "policy_epochs": 3, "first_epochs_factor": 3, "batch_size": 32, "lr": 1e-4,
+        "idm_samples": 20_000,
+    },
+    ("classic", "cpu"): {
+        "iterations": 2, "arch": "mlp", "attention": True, "idm_epochs": 2, "policy_epochs": 4,
+        "first_epochs_factor": 2, "batch_size": 512, "lr": 3e-3, "idm_samples": 50_000,
+        "eval_episodes": 100,
+    },
+    ("classic", "paper"): {
+        "iterations": 2, "arch": "mlp", "attention": True, "idm_epochs": 2, "policy_epochs": 4,
+        "first_epochs_factor": 2, "batch_size": 32, "lr": 1e-3, "idm_samples": 50_000,
+        "eval_episodes": 100,
+    },
+}  # fmt: skip
+
+#: Per-environment changes on top of :data:`DEFAULTS` (any preset).
+ENV_DEFAULTS: dict[str, dict[str, Any]] = {
+    # 2x2-pixel cells on 64x64 frames: both networks need longer to resolve them.
+    "AbcoMaze10x10-v0": {"idm_epochs": 2, "policy_epochs": 10},
+}
+
+#: Settings that may differ between a run and its resumption (and between a finished grid
+#: cell and a re-run of the grid): where things are, how loud, how many threads.
+RUNTIME_FIELDS = ("quiet", "run_dir", "cache_dir", "threads", "expert_data", "pre_data", "plots",
+                  "plot_layouts")  # fmt: skip
+
+
+def comparable(config: Mapping[str, Any]) -> dict[str, Any]:
+    """The fields of a config (as a dict) that make a run what it is (no runtime fields)."""
+    return {k: v for k, v in config.items() if k not in RUNTIME_FIELDS}
+
+
+# -- command line ---------------------------------------------------------------------------
+
+
+def flag_of(name: str) -> str:
+    """The command-line option of a field: ``idm_epochs`` -> ``--idm-epochs``."""
+    return "--" + name.replace("_", "-")
+
+
+def _base_type(hint: Any) -> Any:
+    """``int`` of ``int | None``; the type itself otherwise."""
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(hint) if a is not type(None)]
+        return args[0]
+    return typing.get_origin(hint) or hint
+
+
+def _json_object(text: str) -> dict[str, Any]:
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise argparse.ArgumentTypeError(f"not JSON: {exc}") from None
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError("expected a JSON object, e.g. '{\"k\": 1}'")
+    return value
+
+
+def add_config_options(
+    parser: argparse.ArgumentParser | Any,
+    *,
+    exclude: Collection[str] = (),
+    unset_defaults: bool = False,
+) -> None:
+    """Add one option per :class:`RunConfig` field to ``parser`` (or an argument group).
+
+    Args:
+        parser: The parser or argument group.
+        exclude: Fields left out.
+        unset_defaults: Every option defaults to ``None`` ("not set"), as for ``abco bench``'s
+            overrides; otherwise an option defaults to its field's default.
+    """
+    hints = typing.get_type_hints(RunConfig)
+    for f in fields(RunConfig):
+        if f.name in exclude:
+            continue
+        kind = _base_type(hints[f.name])
+        default = None if f.default is MISSING else f.default
+        shown = "per env, preset and method (abco_train.config.DEFAULTS)" if default is None \
+            else default  # fmt: skip
+        help_text = f"{f.metadata.get('help', '')} (default: {shown})".replace("%", "%%")
+        kwargs: dict[str, Any] = {"default": None if unset_defaults else default,
+                                  "help": help_text, "dest": f.name}  # fmt: skip
+        if kind is bool:
+            parser.add_argument(flag_of(f.name), action=argparse.BooleanOptionalAction, **kwargs)
+        elif kind is dict:
+            kwargs["default"] = None if unset_defaults else {}
+            parser.add_argument(flag_of(f.name), type=_json_object, metavar="JSON", **kwargs)
+        else:
+            choices = f.metadata.get("choices")
+            parser.add_argument(flag_of(f.name), type=kind, choices=choices, **kwargs)
+
+
+def config_from_args(args: argparse.Namespace, **fixed: Any) -> RunConfig:
+    """The :class:`RunConfig` of parsed options (``None`` options keep the field default)."""
+    values: dict[str, Any] = {}
+    for f in fields(RunConfig):
+        value = fixed.get(f.name, getattr(args, f.name, None))
+        if value is not None:
+            values[f.name] = value
+    return RunConfig(**values)

@@ -1,0 +1,125 @@
+"""A run's training data: its two datasets resolved, checked, loaded and subsampled.
+
+:func:`resolve_dataset` is the one place that turns ``--expert-data`` / ``--pre-data`` (a
+file, a dataset id, or nothing for the env's own dataset) into an open
+:class:`abco_data.Dataset`; the trainer and ``abco bench`` both use it.
+:class:`TrainingData` is what a :class:`~abco_train.methods.Method` receives: numpy arrays,
+no torch.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import abco_data
+from abco_train.config import RunConfig
+
+__all__ = ["TrainingData", "resolve_dataset", "load_training_data", "KINDS"]
+
+#: Dataset kinds of a run, by the role they play.
+KINDS = {"expert": "expert", "pre": "pre_demonstrations"}
+
+
+def resolve_dataset(
+    ref: str | None,
+    env_id: str,
+    kind: str,
+    *,
+    cache_dir: str | None = None,
+    progress: bool = False,
+    cached_only: bool = False,
+) -> abco_data.Dataset:
+    """A run's dataset: the file ``ref``, the dataset id ``ref``, or the env's own dataset.
+
+    Args:
+        ref: A path to an HDF5 file, a dataset id, or ``None`` (the env's ``kind`` dataset).
+        env_id: The run's environment.
+        kind: ``"expert"`` or ``"pre_demonstrations"``.
+        cache_dir: abco dataset cache (default ``$ABCO_DATA_HOME``).
+        progress: Show download/generation progress.
+        cached_only: Never fetch or generate: read the cache only (raises if missing).
+
+    Raises:
+        abco_data.DatasetError: The file or id is unusable; the message names it.
+    """
+    if ref is not None and Path(ref).is_file():
+        return abco_data.open_dataset(ref)
+    dataset_id = ref or abco_data.dataset_id(env_id, kind)
+    if cached_only:
+        home = Path(cache_dir) if cache_dir else abco_data.data_home()
+        return abco_data.open_dataset(home / abco_data.spec(dataset_id).filename)
+    return abco_data.load(dataset_id, cache_dir=cache_dir, progress=progress)
+
+
+@dataclass(frozen=True)
+class TrainingData:
+    """The datasets of a run, in memory, as numpy arrays.
+
+    Attributes:
+        env_id: The environment.
+        env_kwargs: Arguments the datasets were recorded with (mazes: ``obs_type``,
+            ``image_size``); evaluation uses the same.
+        observation_space: The datasets' observation space.
+        n_actions: Size of the discrete action space.
+        reference: Expert and random reference returns (per layout for mazes).
+        pre_obs: Pre-demonstration observations, every episode's ``T + 1`` rows.
+        pre_t: Row of ``s_t`` of each pre-demonstration transition (``s_t+1`` is the next).
+        pre_actions: The true action of each pre-demonstration transition.
+        expert_obs: Expert observations, every episode's ``T + 1`` rows.
+        expert_t: Row of ``s_t`` of each expert transition.
+        expert_eval_actions: The expert's true actions: for measuring IDM accuracy (and for
+            ``bc``, the supervised reference) only, never as labels of an IfO method.
+    """
+
+    env_id: str
+    env_kwargs: dict[str, Any]
+    observation_space: Any
+    n_actions: int
+    reference: abco_data.ReferenceReturns
+    pre_obs: np.ndarray
+    pre_t: np.ndarray
+    pre_actions: np.ndarray
+    expert_obs: np.ndarray
+    expert_t: np.ndarray
+    expert_eval_actions: np.ndarray
+
+    @property
+    def is_maze(self) -> bool:
+        """Whether the data comes from a maze (references per layout)."""
+        return self.reference.layout_ids is not None
+
+
+def _columns(dataset: abco_data.Dataset, episodes: int | None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Observations, ``s_t`` rows and actions of a dataset's first ``episodes`` episodes."""
+    arrays = dataset.load_arrays()
+    obs_t, _ = dataset.transition_index()
+    actions = dataset.actions_of_transitions(idm_eval=True)
+    if episodes is not None:
+        n = int(arrays.episode_lengths[:episodes].sum())
+        obs_t, actions = obs_t[:n], actions[:n]
+    return arrays.observations, obs_t, actions
+
+
+def load_training_data(config: RunConfig) -> TrainingData:
+    """Load (download or generate if needed) and subsample the run's two datasets."""
+    progress = not config.quiet
+    expert = resolve_dataset(config.expert_data, config.env, KINDS["expert"],
+                             cache_dir=config.cache_dir, progress=progress)  # fmt: skip
+    pre = resolve_dataset(config.pre_data, config.env, KINDS["pre"],
+                          cache_dir=config.cache_dir, progress=progress)  # fmt: skip
+    pre_obs, pre_t, pre_actions = _columns(pre, None)
+    if config.pre_transitions is not None:
+        pre_t, pre_actions = pre_t[: config.pre_transitions], pre_actions[: config.pre_transitions]
+    expert_obs, expert_t, expert_actions = _columns(expert, config.expert_episodes)
+    return TrainingData(
+        env_id=config.env, env_kwargs=json.loads(expert.attrs.get("env_kwargs", "{}") or "{}"),
+        observation_space=expert.observation_space, n_actions=int(expert.action_space.n),
+        reference=expert.reference, pre_obs=pre_obs, pre_t=pre_t, pre_actions=pre_actions,
+        expert_obs=expert_obs, expert_t=expert_t, expert_eval_actions=expert_actions,
+    )  # fmt: skip
