@@ -2,9 +2,31 @@
 
 ``abco train --env AbcoMaze5x5-v0 --method abco --seed 0`` runs :func:`abco_train.train.train`
 on :class:`abco_train.config.RunConfig`'s defaults. Importing this package does not import torch;
-its modules do.
+its modules do. A trained policy: ``abco_train.load_policy(run_dir)``
+(:mod:`abco_train.policy`).
 """
 
-__version__ = "0.1.0"
+from typing import Any
 
-__all__ = ["__version__"]
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("abco")  # one home for the version: pyproject.toml
+    except PackageNotFoundError:  # a source tree that was never installed
+        return "0+unknown"
+
+
+__version__ = _version()
+
+__all__ = ["__version__", "load_policy", "Policy"]
+
+
+def __getattr__(name: str) -> Any:
+    # ``abco_train.load_policy`` without importing torch on ``import abco_train``.
+    if name in ("load_policy", "Policy"):
+        from abco_train import policy
+
+        return getattr(policy, name)
+    raise AttributeError(f"module 'abco_train' has no attribute {name!r}")

@@ -1,4 +1,4 @@
-"""The ``abco`` command: ``train``, ``bench``, ``report`` and ``data``.
+"""The ``abco`` command: ``train``, ``bench``, ``report``, ``play`` and ``data``.
 
 Every field of :class:`abco_train.config.RunConfig` is an option of ``abco train`` and an
 override of ``abco bench`` (``--idm-epochs 3``, ``--no-attention``, ...), generated from the
@@ -33,12 +33,15 @@ __all__ = ["build_parser", "main"]
 
 def _user_errors() -> tuple[type[BaseException], ...]:
     """Exceptions that mean bad input: printed as one line, exit code 2."""
+    from gymnasium.error import DependencyNotInstalled
+
     from abco_train.backends import BackendError
     from abco_train.methods import PluginError
     from abco_train.report import ReportError
     from abco_train.run_folder import RunFolderError
 
-    return ConfigError, DatasetError, PluginError, ReportError, BackendError, RunFolderError
+    return (ConfigError, DatasetError, PluginError, ReportError, BackendError, RunFolderError,
+            DependencyNotInstalled)  # fmt: skip
 
 
 # -- abco train ------------------------------------------------------------------------------
@@ -120,6 +123,36 @@ def _report_options(parser: argparse.ArgumentParser) -> None:
                         help="env of the IDM label-distribution plot (default the 5x5 maze)")
 
 
+# -- abco play -------------------------------------------------------------------------------
+
+
+def _play(args: argparse.Namespace) -> int:
+    from abco_train.grid import parse_seeds
+    from abco_train.policy import load_policy, record_gif
+
+    episodes = parse_seeds(args.episodes)
+    policy = load_policy(args.run_dir, quiet=args.quiet)
+    out = args.out or str(args.run_dir).rstrip("/") + f"/play_{args.split}.gif"
+    path = record_gif(policy, out, episodes, split=args.split, max_steps=args.max_steps,
+                      fps=args.fps, progress=not args.quiet)  # fmt: skip
+    print(f"animation: {path}")
+    return 0
+
+
+def _play_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run_dir", help="a run folder written by abco train")
+    parser.add_argument("--episodes", default="0-3",
+                        help="mazes: layout indices of the split; classic control: reset seeds"
+                        " (e.g. 0-3 or 0,5; default 0-3)")  # fmt: skip
+    parser.add_argument("--split", choices=("train", "test"), default="train",
+                        help="maze split (default train)")  # fmt: skip
+    parser.add_argument("--out", default=None, help="GIF to write (default RUN_DIR/play_SPLIT.gif)")
+    parser.add_argument("--max-steps", type=_positive, default=200,
+                        help="cap on each episode's length (default 200)")  # fmt: skip
+    parser.add_argument("--fps", type=_positive, default=8, help="frames per second (default 8)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
 # -- the parser and the entry point ------------------------------------------------------------
 
 
@@ -134,7 +167,7 @@ def _subcommand(sub: Any, name: str, help: str, options: Callable[[Any], None],
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The parser of ``abco``: ``train``, ``bench``, ``report`` and ``data``."""
+    """The parser of ``abco``: ``train``, ``bench``, ``report``, ``play`` and ``data``."""
     parser = argparse.ArgumentParser(prog="abco", description="ABCO: imitation from observation")
     parser.add_argument("--version", action="version", version=f"abco {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -145,6 +178,8 @@ def build_parser() -> argparse.ArgumentParser:
                 _bench)  # fmt: skip
     _subcommand(sub, "report", "tables and plots of an abco bench grid", _report_options,
                 _report, plugins=False)  # fmt: skip
+    _subcommand(sub, "play", "roll a trained policy out and write an animated GIF", _play_options,
+                _play)  # fmt: skip
     add_data_subcommands(sub)
     return parser
 

@@ -39,13 +39,16 @@ import abco_envs
 
 __all__ = [
     "RunConfig", "ConfigError", "DEFAULTS", "ENV_DEFAULTS", "RUNTIME_FIELDS", "PRESETS",
-    "PROTOCOLS", "ARCHS", "env_kind", "known_envs", "comparable",
+    "PROTOCOLS", "ARCHS", "ARCHS_BY_KIND", "env_kind", "known_envs", "comparable",
     "add_config_options", "config_from_args", "flag_of",
 ]  # fmt: skip
 
 PRESETS = ("cpu", "paper")
 PROTOCOLS = ("paper", "standard")
+#: Encoder architectures: ``mlp`` (vector states), ``cnn`` (compact, CPU default for images),
+#: ``resnet18`` (the paper's image network); the ones that fit each env kind's observations.
 ARCHS = ("mlp", "cnn", "resnet18")
+ARCHS_BY_KIND = {"maze": ("cnn", "resnet18"), "classic": ("mlp",)}
 
 
 class ConfigError(ValueError):
@@ -113,7 +116,8 @@ class RunConfig:
     pre_data: str | None = _opt("pre-demonstration dataset id or HDF5 file (default: the env's)")
     cache_dir: str | None = _opt("abco dataset cache (default $ABCO_DATA_HOME)")
     run_dir: str | None = _opt("run folder (default runs/{env}-{method}-s{seed})")
-    threads: int = _opt("torch threads", 2, min=1)
+    threads: int = _opt("torch threads; 1 stays fast when other processes share the cores "
+                        "(more threads spin-wait on each other under load)", 1, min=1)
     deterministic: bool = _opt("deterministic torch kernels", True)
     quiet: bool = _opt("no progress bars", False)
     plot_layouts: int = _opt("mazes: layouts whose paths are drawn", 4, min=0)
@@ -148,7 +152,10 @@ class RunConfig:
         Raises:
             ConfigError: The first field out of range, named as its command-line option.
         """
-        env_kind(self.env)
+        kind = env_kind(self.env)
+        if self.arch is not None and self.arch in ARCHS and self.arch not in ARCHS_BY_KIND[kind]:
+            raise ConfigError(f"--arch {self.arch} does not fit {self.env}'s observations; use "
+                              f"{' or '.join(ARCHS_BY_KIND[kind])}")  # fmt: skip
         for f in fields(self):
             value = getattr(self, f.name)
             if value is None:

@@ -23,6 +23,8 @@ import torch
 from gymnasium import spaces
 from torch import nn
 
+from abco_train.config import ARCHS
+
 __all__ = [
     "ARCHS",
     "SelfAttention2d",
@@ -35,9 +37,6 @@ __all__ = [
     "build_networks",
 ]
 
-#: Encoder architectures: ``mlp`` (vector states), ``cnn`` (compact, CPU default for images),
-#: ``resnet18`` (the paper's image network).
-ARCHS = ("mlp", "cnn", "resnet18")
 
 
 class SelfAttention2d(nn.Module):

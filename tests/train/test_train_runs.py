@@ -7,55 +7,14 @@ import json
 
 import numpy as np
 import pytest
+from train_testing import tiny_config
 
-import abco_data
 import abco_envs
 from abco_train.abco import VARIANTS
-from abco_train.config import RunConfig
 from abco_train.evaluate import rollout, score
 from abco_train.train import train
 
 ENVS = (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
-TINY = {
-    "maze_expert": {"layouts": 2, "solutions_per_layout": 1, "reference_episodes": 2},
-    "maze_pre": {"layouts": 2, "episodes_per_layout": 4, "max_steps": 5,
-                 "reference_episodes": 2},
-    "classic_expert": {"episodes": 1, "reference_episodes": 2, "reference_expert_episodes": 1},
-    "classic_pre": {"transitions": 300, "reference_episodes": 2, "reference_expert_episodes": 1},
-}
-
-
-@pytest.fixture(scope="session")
-def tiny_data(tmp_path_factory):
-    """``env -> (expert file, pre file)``, generated once per session by abco_data."""
-    root = tmp_path_factory.mktemp("tiny_data")
-    cache: dict[str, tuple[str, str]] = {}
-
-    def get(env_id: str) -> tuple[str, str]:
-        if env_id not in cache:
-            family = "maze" if env_id in abco_envs.MAZE_IDS else "classic"
-            paths = []
-            for kind, key in (("expert", "expert"), ("pre_demonstrations", "pre")):
-                ds_id = abco_data.dataset_id(env_id, kind)
-                path = root / f"{ds_id.split('/')[1]}.hdf5"
-                abco_data.generate(ds_id, path, progress=False, **TINY[f"{family}_{key}"])
-                paths.append(str(path))
-            cache[env_id] = (paths[0], paths[1])
-        return cache[env_id]
-
-    return get
-
-
-def tiny_config(env_id, method, data, run_dir, **changes) -> RunConfig:
-    expert, pre = data(env_id)
-    values = dict(
-        env=env_id, method=method, seed=0, iterations=1, idm_epochs=1, policy_epochs=1,
-        first_epochs_factor=1, eval_layouts=2, eval_episodes=2, expert_data=expert,
-        pre_data=pre, run_dir=str(run_dir), quiet=True, plot_layouts=2, eval_max_steps=30,
-        plots=False,
-    )
-    values.update(changes)
-    return RunConfig(**values)
 
 
 @pytest.mark.parametrize("env_id", ENVS)

@@ -1,0 +1,95 @@
+"""The shape of the code: layers envs -> data -> train, no import cycles, no private names
+imported across modules. Read from the source with ``ast`` (imports inside functions count)."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("abco_envs", "abco_data", "abco_train")
+LAYER = {name: i for i, name in enumerate(PACKAGES)}
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def _modules() -> dict[str, Path]:
+    return {_module_name(p): p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
+
+
+MODULES = _modules()
+
+
+def _resolve(target: str) -> str | None:
+    """The project module that ``target`` names (a module, or a name inside a package)."""
+    while target and target not in MODULES:
+        target = target.rpartition(".")[0]
+    return target or None
+
+
+def _imports(module: str) -> list[tuple[str, str | None]]:
+    """(imported project module, imported name or None) for every import in ``module``."""
+    tree = ast.parse(MODULES[module].read_text())
+    is_package = MODULES[module].name == "__init__.py"
+    out: list[tuple[str, str | None]] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(m, None) for a in node.names if (m := _resolve(a.name))]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = module.split(".")
+                anchor = anchor if is_package else anchor[:-1]
+                anchor = anchor[: len(anchor) - node.level + 1]
+                base = ".".join([*anchor, base] if base else anchor)
+            for alias in node.names:
+                sub = _resolve(f"{base}.{alias.name}")
+                if sub is not None and sub == f"{base}.{alias.name}":
+                    out.append((sub, None))  # ``from pkg import module``
+                elif (m := _resolve(base)) is not None:
+                    out.append((m, alias.name))
+    return out
+
+
+GRAPH = {m: sorted({t for t, _ in _imports(m) if t != m}) for m in MODULES}
+
+
+def test_layers_point_one_way() -> None:
+    upward = [f"{m} -> {t}" for m, targets in GRAPH.items() for t in targets
+              if LAYER[t.split(".")[0]] > LAYER[m.split(".")[0]]]  # fmt: skip
+    assert upward == []
+
+
+def test_no_import_cycles() -> None:
+    # Packages' __init__ re-export their modules: an edge into a package's __init__ from its
+    # own modules would be a cycle through the package, so those count too.
+    state: dict[str, int] = {}
+    cycles: list[list[str]] = []
+
+    def visit(node: str, stack: list[str]) -> None:
+        state[node] = 1
+        for nxt in GRAPH[node]:
+            if state.get(nxt) == 1:
+                cycles.append([*stack[stack.index(nxt):], nxt])
+            elif nxt not in state:
+                visit(nxt, [*stack, nxt])
+        state[node] = 2
+
+    for module in GRAPH:
+        if module not in state:
+            visit(module, [module])
+    assert cycles == []
+
+
+@pytest.mark.parametrize("module", sorted(MODULES))
+def test_no_private_name_crosses_a_module(module: str) -> None:
+    private = [f"{target}.{name}" for target, name in _imports(module)
+               if name and name.startswith("_") and not name.startswith("__") and target != module]
+    assert private == []
