@@ -75,8 +75,10 @@ def _fit(
     rng: np.random.Generator,
     desc: str = "",
     quiet: bool = True,
+    device: torch.device | None = None,
 ) -> float:
-    """Cross-entropy epochs over ``labels``; ``inputs(idx) -> args of net``. Mean last loss."""
+    """Cross-entropy epochs over ``labels``; ``inputs(idx) -> args of net`` (CPU tensors,
+    moved batch by batch to ``device``). Mean loss of the last epoch."""
     from tqdm.auto import tqdm
 
     net.train()
@@ -89,7 +91,8 @@ def _fit(
         for start in range(0, n, batch_size):
             bar.update(1)
             idx = order[start : start + batch_size]
-            loss = F.cross_entropy(net(*inputs(idx)), labels[idx])
+            batch = [x.to(device, non_blocking=True) for x in inputs(idx)]
+            loss = F.cross_entropy(net(*batch), labels[idx].to(device, non_blocking=True))
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
@@ -99,13 +102,14 @@ def _fit(
 
 
 @torch.no_grad()
-def _predict(net: torch.nn.Module, inputs: Any, n: int, batch_size: int = 512) -> torch.Tensor:
-    """Argmax predictions of ``net`` over ``n`` rows, in batches."""
+def _predict(net: torch.nn.Module, inputs: Any, n: int, batch_size: int = 512,
+             device: torch.device | None = None) -> torch.Tensor:  # fmt: skip
+    """Argmax predictions of ``net`` over ``n`` rows, in batches (on CPU)."""
     net.eval()
     out = [
-        net(*inputs(torch.arange(s, min(s + batch_size, n)))).argmax(1)
-        for s in range(0, n, batch_size)
-    ]
+        net(*[x.to(device) for x in inputs(torch.arange(s, min(s + batch_size, n)))]).argmax(1)
+        .cpu() for s in range(0, n, batch_size)
+    ]  # fmt: skip
     return torch.cat(out) if out else torch.zeros(0, dtype=torch.long)
 
 
@@ -133,6 +137,10 @@ class ABCO(Method):
         self.policy, self.idm = build_networks(
             data.observation_space, data.n_actions, config.arch, bool(config.attention), **stats
         )
+        # Networks live on the run's device; the data stays in CPU memory and travels to the
+        # device one batch at a time (a maze's frames need not fit in GPU memory).
+        self.device = torch.device(config.device)
+        self.policy, self.idm = self.policy.to(self.device), self.idm.to(self.device)
         self.policy_opt = torch.optim.Adam(self.policy.parameters(), lr=config.lr)
         self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=config.lr)
         # -- data as torch tensors (no copies) ------------------------------------------------
@@ -171,15 +179,16 @@ class ABCO(Method):
             if iteration == 0 or self.idm_data != "pre":
                 stats["idm_loss"] = self._train_idm(cfg.idm_epochs * boost)
                 stats["idm_samples"] = int(len(self.s_pre) + len(self.s_pos))
-            labels = _predict(self.idm, self._expert_pairs, expert_n)
+            labels = _predict(self.idm, self._expert_pairs, expert_n, device=self.device)
             stats["idm_expert_accuracy"] = float((labels == true).float().mean())
         self.labels = labels.numpy()
         stats["policy_loss"] = _fit(
             self.policy, self.policy_opt, lambda idx: (self.expert_obs[self.expert_t[idx]],),
             labels, cfg.policy_epochs * boost, cfg.batch_size, self.rng, "policy", cfg.quiet,
+            self.device,
         )  # fmt: skip
         predicted = _predict(self.policy, lambda idx: (self.expert_obs[self.expert_t[idx]],),
-                             expert_n)  # fmt: skip
+                             expert_n, device=self.device)  # fmt: skip
         stats["policy_label_accuracy"] = float((predicted == labels).float().mean())
         return stats
 
@@ -203,7 +212,7 @@ class ABCO(Method):
             return s, s1
 
         return _fit(self.idm, self.idm_opt, pairs, labels, epochs, self.config.batch_size,
-                    self.rng, "IDM", self.config.quiet)  # fmt: skip
+                    self.rng, "IDM", self.config.quiet, self.device)  # fmt: skip
 
     # -- post-demonstrations and the next I_s --------------------------------------------------
 
@@ -250,7 +259,7 @@ class ABCO(Method):
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Greedy actions of the policy for a batch of observations."""
         self.policy.eval()
-        return self.policy(torch.as_tensor(obs)).argmax(1).numpy()
+        return self.policy(torch.as_tensor(obs, device=self.device)).argmax(1).cpu().numpy()
 
     def expert_labels(self) -> np.ndarray | None:
         """The labels the policy was last trained on (IDM predictions of the expert pairs)."""

@@ -39,7 +39,7 @@ import abco_envs
 
 __all__ = [
     "RunConfig", "ConfigError", "DEFAULTS", "ENV_DEFAULTS", "RUNTIME_FIELDS", "PRESETS",
-    "PROTOCOLS", "ARCHS", "ARCHS_BY_KIND", "env_kind", "known_envs", "comparable",
+    "PROTOCOLS", "ARCHS", "ARCHS_BY_KIND", "DEVICES", "env_kind", "known_envs", "comparable",
     "add_config_options", "config_from_args", "flag_of",
 ]  # fmt: skip
 
@@ -48,6 +48,7 @@ PROTOCOLS = ("paper", "standard")
 #: Encoder architectures: ``mlp`` (vector states), ``cnn`` (compact, CPU default for images),
 #: ``resnet18`` (the paper's image network); the ones that fit each env kind's observations.
 ARCHS = ("mlp", "cnn", "resnet18")
+DEVICES = ("auto", "cpu", "cuda")
 ARCHS_BY_KIND = {"maze": ("cnn", "resnet18"), "classic": ("mlp",)}
 
 
@@ -116,6 +117,8 @@ class RunConfig:
     pre_data: str | None = _opt("pre-demonstration dataset id or HDF5 file (default: the env's)")
     cache_dir: str | None = _opt("abco dataset cache (default $ABCO_DATA_HOME)")
     run_dir: str | None = _opt("run folder (default runs/{env}-{method}-s{seed})")
+    device: str = _opt("where the networks train and act: auto (cuda if available), cpu or "
+                       "cuda", "auto", choices=DEVICES)
     threads: int = _opt("torch threads; 1 stays fast when other processes share the cores "
                         "(more threads spin-wait on each other under load)", 1, min=1)
     deterministic: bool = _opt("deterministic torch kernels", True)
@@ -215,8 +218,8 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
 
 #: Settings that may differ between a run and its resumption (and between a finished grid
 #: cell and a re-run of the grid): where things are, how loud, how many threads.
-RUNTIME_FIELDS = ("quiet", "run_dir", "cache_dir", "threads", "expert_data", "pre_data", "plots",
-                  "plot_layouts")  # fmt: skip
+RUNTIME_FIELDS = ("quiet", "run_dir", "cache_dir", "threads", "device", "expert_data", "pre_data",
+                  "plots", "plot_layouts")  # fmt: skip
 
 
 def comparable(config: Mapping[str, Any]) -> dict[str, Any]:

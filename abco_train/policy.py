@@ -29,7 +29,7 @@ from abco_train.config import RunConfig, env_kind
 from abco_train.data import TrainingData, load_training_data
 from abco_train.methods import Method, get_method
 from abco_train.run_folder import CHECKPOINT, CONFIG, RunFolderError, read_json
-from abco_train.train import final_evaluation, seed_everything
+from abco_train.train import final_evaluation, resolve_device, seed_everything
 
 __all__ = ["Policy", "load_policy", "record_gif"]
 
@@ -72,11 +72,13 @@ class Policy:
         return final_evaluation(cfg, self.data, self.method, [], Path(cfg.run_dir or "."))
 
 
-def load_policy(run_dir: str | os.PathLike[str], *, quiet: bool = True) -> Policy:
-    """The trained policy of a run folder, on CPU.
+def load_policy(run_dir: str | os.PathLike[str], *, device: str = "cpu", quiet: bool = True
+                ) -> Policy:  # fmt: skip
+    """The trained policy of a run folder (on CPU unless asked, wherever it trained).
 
     Args:
         run_dir: A folder written by ``abco train`` (or a cell of ``abco bench``).
+        device: Where the policy acts: ``cpu``, ``cuda`` or ``auto``.
         quiet: No progress bars while the datasets are read.
 
     Raises:
@@ -88,9 +90,9 @@ def load_policy(run_dir: str | os.PathLike[str], *, quiet: bool = True) -> Polic
     values = read_json(run_dir / CONFIG)
     known = {f.name for f in fields(RunConfig)}
     cfg = RunConfig(**{k: v for k, v in values.items() if k in known})
-    cfg = cfg.replace(run_dir=str(run_dir), quiet=quiet)
+    cfg = cfg.replace(run_dir=str(run_dir), quiet=quiet, device=resolve_device(device))
     try:
-        state = torch.load(run_dir / CHECKPOINT, map_location="cpu", weights_only=False)
+        state = torch.load(run_dir / CHECKPOINT, map_location=cfg.device, weights_only=False)
     except (RuntimeError, EOFError, OSError, ValueError) as exc:
         raise RunFolderError(f"{run_dir / CHECKPOINT} is damaged ({exc})") from None
     rng = seed_everything(cfg.seed, cfg.threads, cfg.deterministic)

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from abco_train.config import RunConfig, comparable
+from abco_train.config import ConfigError, RunConfig, comparable
 from abco_train.data import TrainingData, load_training_data
 from abco_train.evaluate import rollout, score
 from abco_train.methods import Method, get_method, resolve_config
@@ -36,7 +36,7 @@ from abco_train.run_folder import (
     write_atomic,
 )
 
-__all__ = ["train", "final_evaluation", "format_table", "seed_everything", "RunFolderError",
+__all__ = ["train", "final_evaluation", "format_table", "seed_everything", "resolve_device",
            "EVAL_SEED", "FINAL_SEED"]  # fmt: skip
 
 EVAL_SEED = 100_000_000
@@ -52,6 +52,20 @@ def seed_everything(seed: int, threads: int = 2, deterministic: bool = True) -> 
     torch.set_flush_denormal(True)
     torch.use_deterministic_algorithms(deterministic, warn_only=True)
     return np.random.default_rng(seed)
+
+
+def resolve_device(device: str) -> str:
+    """``auto`` -> ``cuda`` when a CUDA device is available, else ``cpu``.
+
+    Raises:
+        ConfigError: ``cuda`` asked for where torch sees no CUDA device.
+    """
+    if device == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise ConfigError(f"--device {device}: torch {torch.__version__} sees no CUDA device "
+                          "here; use --device cpu or auto")  # fmt: skip
+    return device
 
 
 def _eval_kwargs(cfg: RunConfig, data: TrainingData, split: str, seed: int) -> dict[str, Any]:
@@ -88,13 +102,14 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
     from tqdm.auto import tqdm
 
     cfg = resolve_config(config)
+    cfg = cfg.replace(device=resolve_device(cfg.device))
     run_dir = Path(cfg.run_dir)
     stored = finished_result(run_dir, asdict(cfg))
     if stored is not None:
         return stored
     run_dir.mkdir(parents=True, exist_ok=True)
     ckpt_path, metrics_path = run_dir / CHECKPOINT, run_dir / METRICS
-    state = _load_checkpoint(ckpt_path)
+    state = _load_checkpoint(ckpt_path, cfg.device)
     if state is not None and comparable(state["config"]) != comparable(asdict(cfg)):
         raise RunFolderError(
             f"{run_dir} holds a run of another config; use another --run-dir or delete it"
@@ -109,7 +124,9 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
     start = 0
     if state is not None:
         method.load_state_dict(state["method"])
-        torch.set_rng_state(state["torch_rng"])
+        torch.set_rng_state(state["torch_rng"].cpu())
+        if state.get("cuda_rng") is not None and cfg.device.startswith("cuda"):
+            torch.cuda.set_rng_state_all([x.cpu() for x in state["cuda_rng"]])
         start = int(state["iteration"]) + 1
         history = _read_history(metrics_path, start)
     write_atomic(metrics_path, "".join(json.dumps(r) + "\n" for r in history))
@@ -135,7 +152,9 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
         with metrics_path.open("a") as f:
             f.write(json.dumps(record) + "\n")
         payload = {"iteration": i, "method": method.state_dict(),
-                   "torch_rng": torch.get_rng_state(), "config": asdict(cfg)}  # fmt: skip
+                   "torch_rng": torch.get_rng_state(), "config": asdict(cfg),
+                   "cuda_rng": torch.cuda.get_rng_state_all() if cfg.device.startswith("cuda")
+                   else None}  # fmt: skip
         write_atomic(ckpt_path, lambda tmp, payload=payload: torch.save(payload, tmp))
         bar.set_postfix(P=f"{evaluation['performance']:.3f}",
                         win=f"{evaluation['success_rate']:.2f}")  # fmt: skip
@@ -149,8 +168,8 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
     return final
 
 
-def _load_checkpoint(path: Path) -> dict[str, Any] | None:
-    """The checkpoint's state, ``None`` without one.
+def _load_checkpoint(path: Path, device: str) -> dict[str, Any] | None:
+    """The checkpoint's state on ``device`` (a GPU run resumes on CPU), ``None`` without one.
 
     Raises:
         RunFolderError: The checkpoint is damaged (e.g. truncated).
@@ -158,7 +177,7 @@ def _load_checkpoint(path: Path) -> dict[str, Any] | None:
     if not path.exists():
         return None
     try:
-        return torch.load(path, weights_only=False)
+        return torch.load(path, map_location=device, weights_only=False)
     except (RuntimeError, EOFError, OSError, ValueError) as exc:
         raise RunFolderError(f"{path} is damaged ({type(exc).__name__}: {exc}); delete it to "
                              "restart the run") from None  # fmt: skip

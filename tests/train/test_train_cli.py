@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from train_testing import tiny_config
 
 import abco_train
@@ -154,3 +155,34 @@ def test_play_writes_an_animation(tiny_data, tmp_path, capsys) -> None:
     with Image.open(out) as gif:
         assert gif.n_frames >= 4 and min(gif.size) >= 256
     assert main(["play", str(tmp_path / "nothing")]) == 2
+
+
+def test_device_cpu_is_the_cpu_run(tiny_data, tmp_path) -> None:
+    a = train(tiny_config("CartPole-v1", "abco", tiny_data, tmp_path / "a", device="cpu"))
+    b = train(tiny_config("CartPole-v1", "abco", tiny_data, tmp_path / "b", device="auto"))
+    drop = ("figures", "seconds")
+    if not torch.cuda.is_available():  # auto is cpu here: the very same run
+        assert {k: v for k, v in a.items() if k not in drop} == \
+            {k: v for k, v in b.items() if k not in drop}
+    assert json.loads((tmp_path / "a" / "config.json").read_text())["device"] == "cpu"
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has a CUDA device")
+def test_cuda_without_a_gpu_is_refused(tmp_path, capsys) -> None:
+    code = main(["train", "--env", "CartPole-v1", "--device", "cuda", "--quiet",
+                 "--run-dir", str(tmp_path / "run")])  # fmt: skip
+    assert code == 2 and "sees no CUDA device" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+@pytest.mark.parametrize("env", ["CartPole-v1", "AbcoMaze3x3-v0"])
+def test_cuda_run_resumes_and_loads_on_cpu(tiny_data, tmp_path, env) -> None:
+    cfg = tiny_config(env, "abco", tiny_data, tmp_path / "gpu", device="cuda")
+    assert train(cfg, stop_after=1) is None
+    final = train(cfg)  # resumes from a checkpoint holding CUDA tensors
+    assert json.loads((tmp_path / "gpu" / "config.json").read_text())["device"] == "cuda"
+    policy = abco_train.load_policy(tmp_path / "gpu")  # on CPU
+    assert next(policy.method.policy.parameters()).device.type == "cpu"
+    headline = "episodes" if env == "CartPole-v1" else "train/paper"
+    assert np.isfinite(final[headline]["performance"])
+    assert np.isfinite(policy.evaluate()[headline]["performance"])
