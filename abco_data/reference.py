@@ -25,11 +25,14 @@ from functools import lru_cache
 
 import numpy as np
 
+from abco_envs.maze.rules import MAX_EPISODE_STEPS
+
 __all__ = ["ReferenceReturns", "maze_reference", "classic_reference", "REFERENCE_SEED"]
 
 #: Seed root of every reference computation (independent of the datasets' seeds).
 REFERENCE_SEED = 12345
-MAZE_MAX_STEPS = 1000
+#: The maze's step limit, which caps every random walk (the env's own rule).
+MAZE_MAX_STEPS = MAX_EPISODE_STEPS
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,29 +69,23 @@ class ReferenceReturns:
 
 def _random_walk_returns(cells: np.ndarray, episodes: int, seed: int) -> np.ndarray:
     """Mean return of ``episodes`` uniform random walks on each layout of ``cells`` (k, n, n)."""
-    from abco_envs.maze.layout import DELTAS, OPEN_BITS
+    from abco_envs.maze.rules import MazeDynamics, episode_return, move_table
 
     k, n = cells.shape[0], cells.shape[1]
     rng = np.random.default_rng([REFERENCE_SEED, seed, n])
+    dynamics, moves = MazeDynamics(n), move_table(cells)
     layout = np.repeat(np.arange(k), episodes)
-    row = np.zeros(layout.size, dtype=np.int64)
-    col = np.zeros(layout.size, dtype=np.int64)
+    cell = np.zeros(layout.size, dtype=np.intp)  # every walk starts in cell (0, 0)
     hit = np.zeros(layout.size, dtype=np.int64)  # step at which the goal was reached, 0 = never
     active = np.arange(layout.size)
     for t in range(1, MAZE_MAX_STEPS + 1):
         a = rng.integers(4, size=active.size)
-        r, c = row[active], col[active]
-        opened = (cells[layout[active], r, c] & OPEN_BITS[a]) > 0
-        r = r + DELTAS[a, 0] * opened
-        c = c + DELTAS[a, 1] * opened
-        row[active], col[active] = r, c
-        done = (r == n - 1) & (c == n - 1)
+        cell[active], _, done = dynamics.step(moves, layout[active], cell[active], a)
         hit[active[done]] = t
         active = active[~done]
         if not active.size:
             break
-    step = 0.1 / (n * n)
-    returns = np.where(hit > 0, 1.0 - (hit - 1) * step, -MAZE_MAX_STEPS * step)
+    returns = episode_return(n, np.where(hit > 0, hit, MAZE_MAX_STEPS), hit > 0)
     return returns.reshape(k, episodes).mean(axis=1)
 
 
@@ -97,6 +94,7 @@ def maze_reference(size: int, episodes: int = 100) -> ReferenceReturns:
     """Per-layout references of the ``size`` x ``size`` maze over its train and test splits."""
     from abco_envs.maze.layout import shortest_path_length
     from abco_envs.maze.pool import layout_pool
+    from abco_envs.maze.rules import optimal_return
 
     pool = layout_pool(size)
     ids, splits, expert, random = [], [], [], []
@@ -105,7 +103,7 @@ def maze_reference(size: int, episodes: int = 100) -> ReferenceReturns:
         if not len(cells):
             continue
         lengths = np.array([shortest_path_length(c) for c in cells], dtype=np.float64)
-        expert.append(1.0 - (lengths - 1) * 0.1 / size**2)
+        expert.append(optimal_return(size, lengths))
         random.append(_random_walk_returns(np.asarray(cells), episodes, split_no))
         ids.extend(pool.ids(name))
         splits.extend([name] * len(cells))

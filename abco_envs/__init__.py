@@ -15,6 +15,7 @@ Example:
 from gymnasium.envs.registration import register, registry
 
 from abco_envs.maze import Action, InvalidLayoutError, MazeEnv, MazeVectorEnv, layout_pool
+from abco_envs.maze.rules import MAX_EPISODE_STEPS
 
 __version__ = "0.1.0"
 
@@ -45,7 +46,7 @@ for _n, _id in zip(MAZE_SIZES, MAZE_IDS):
             id=_id,
             entry_point="abco_envs.maze.env:MazeEnv",
             vector_entry_point="abco_envs.maze.vector:MazeVectorEnv",
-            max_episode_steps=1000,
+            max_episode_steps=MAX_EPISODE_STEPS,
             kwargs={"size": _n},
         )
 

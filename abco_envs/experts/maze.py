@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from abco_envs.maze.layout import DELTAS, OPEN_BITS, distances_to, validate_layout
+from abco_envs.maze.layout import distances_to, validate_layout
+from abco_envs.maze.rules import DELTAS, OPEN_BITS, START_POSITION, goal_position
 
 __all__ = ["MazeExpert"]
 
@@ -44,8 +45,7 @@ class MazeExpert:
     def use_layout(self, cells: np.ndarray) -> None:
         """Plan for ``cells``: BFS distances from every cell to the bottom-right goal."""
         self.cells = validate_layout(cells)
-        n = self.cells.shape[0]
-        self.goal = (n - 1, n - 1)
+        self.goal = goal_position(self.cells.shape[0])
         self.dist = distances_to(self.cells, self.goal)
 
     def reset(self, env: Any) -> None:
@@ -74,7 +74,7 @@ class MazeExpert:
         row, col = info["position"]
         return self.act(int(row), int(col))
 
-    def solve(self, start: tuple[int, int] = (0, 0)) -> list[int]:
+    def solve(self, start: tuple[int, int] = START_POSITION) -> list[int]:
         """The actions of one shortest path from ``start`` to the goal."""
         row, col = start
         actions = []

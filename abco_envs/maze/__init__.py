@@ -1,4 +1,12 @@
-"""The rendered maze: layouts, their canonical pool, rendering, the env and its vector form."""
+"""The rendered maze: its rules, layouts and pool, rendering, the env and its vector form.
+
+Modules, each importing only those above it:
+
+- ``rules``: the rules, named once (cell bits, moves, rewards, step limit) and the step kernel;
+- ``layout``: the generator, validation and shortest paths; ``pool``: the canonical layouts;
+- ``observation``, ``options``, ``reset``, ``render``: what both envs share;
+- ``env`` (:class:`MazeEnv`) and ``vector`` (:class:`MazeVectorEnv`).
+"""
 
 from abco_envs.maze.env import MazeEnv
 from abco_envs.maze.layout import Action, InvalidLayoutError, validate_layout

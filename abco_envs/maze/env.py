@@ -8,48 +8,20 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from abco_envs.maze.layout import (
-    DELTAS,
-    OPEN_BITS,
-    Action,
-    generate_layout,
-    layout_hash,
-    validate_layout,
+from abco_envs.maze.observation import (
+    OBS_TYPES,
+    image_observation_space,
+    state_features,
+    state_observation_space,
 )
-from abco_envs.maze.pool import LOOP_FRACTION, SPLITS, layout_pool
+from abco_envs.maze.options import LAYOUT_SOURCES, check_env_options, resolve_image_size
 from abco_envs.maze.render import MazeRenderer
+from abco_envs.maze.reset import LayoutSource, start_position
+from abco_envs.maze.rules import Action, MazeDynamics
 
-__all__ = ["MazeEnv", "state_observation_space", "state_features", "resolve_image_size"]
-
-OBS_TYPES = ("image", "state")
-LAYOUT_SOURCES = (*SPLITS, "procedural")
-
-
-def resolve_image_size(image_size: int | tuple[int, int]) -> tuple[int, int]:
-    """``64`` -> ``(64, 64)``; ``(h, w)`` stays as it is."""
-    if isinstance(image_size, (int, np.integer)):
-        return int(image_size), int(image_size)
-    height, width = (int(v) for v in image_size)
-    return height, width
-
-
-def state_observation_space(n: int) -> spaces.Box:
-    """Space of ``obs_type="state"``: one-hot row, one-hot col, then 4 open-side bits per cell."""
-    return spaces.Box(0.0, 1.0, shape=(2 * n + 4 * n * n,), dtype=np.float32)
-
-
-def state_features(cells: np.ndarray) -> np.ndarray:
-    """The walls part of a state observation: per cell, 1.0 where open to N, S, E, W."""
-    return ((cells[..., None] & OPEN_BITS) > 0).astype(np.float32).reshape(*cells.shape[:-2], -1)
-
-
-def _check_options(n: int, obs_type: str, split: str) -> None:
-    if obs_type not in OBS_TYPES:
-        raise ValueError(f"unknown obs_type {obs_type!r}; expected one of {OBS_TYPES}")
-    if split not in LAYOUT_SOURCES:
-        raise ValueError(f"unknown split {split!r}; expected one of {LAYOUT_SOURCES}")
-    if n < 2:
-        raise ValueError(f"a maze needs at least 2x2 cells, got size={n}")
+# The helpers and constants below MazeEnv stay importable from here, where they used to live.
+__all__ = ["MazeEnv", "state_observation_space", "state_features", "resolve_image_size",
+           "OBS_TYPES", "LAYOUT_SOURCES"]
 
 
 class MazeEnv(gym.Env[np.ndarray, np.int64]):
@@ -65,7 +37,7 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
 
     ## Action Space
     ``Discrete(4)``: 0 = N (up), 1 = S (down), 2 = E (right), 3 = W (left), as
-    :class:`~abco_envs.maze.layout.Action`. A move into a wall leaves the agent in place.
+    :class:`~abco_envs.maze.rules.Action`. A move into a wall leaves the agent in place.
 
     ## Observation Space
     ``obs_type="image"`` (default): ``Box(0, 255, (H, W, 3), uint8)``, the rendered maze:
@@ -76,7 +48,7 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
 
     ## Rewards
     +1 on reaching the goal, otherwise ``-0.1 / (n * n)`` per step. An optimal episode of ``L``
-    moves returns ``1 - (L - 1) * 0.1 / n**2``.
+    moves returns ``1 - (L - 1) * 0.1 / n**2``. (All rules live in :mod:`abco_envs.maze.rules`.)
 
     ## Starting State
     The agent starts at ``(0, 0)``, or at ``options["start"]`` if given.
@@ -117,7 +89,7 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
         image_size: int | tuple[int, int] = 64,
         split: str = "train",
     ) -> None:
-        _check_options(size, obs_type, split)
+        check_env_options(size, obs_type, split)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"unknown render_mode {render_mode!r}; expected one of"
@@ -129,34 +101,16 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
         self.renderer = MazeRenderer(size, *self.image_size)
         self.action_space = spaces.Discrete(4)
         if obs_type == "image":
-            self.observation_space = spaces.Box(0, 255, (*self.image_size, 3), dtype=np.uint8)
+            self.observation_space = image_observation_space(*self.image_size)
         else:
             self.observation_space = state_observation_space(size)
-        self._layouts = None if split == "procedural" else layout_pool(size).split(split)
-        self._layout_ids = None if split == "procedural" else layout_pool(size).ids(split)
-        self._goal = (size - 1, size - 1)
-        self._step_penalty = -0.1 / (size * size)
+        self._layouts = LayoutSource(size, split)
+        self._dynamics = MazeDynamics(size)
         self._window: Any = None
         self._clock: Any = None
         self.cells: np.ndarray | None = None
 
     # -- episode ------------------------------------------------------------------------------
-
-    def _choose_layout(self, options: dict[str, Any]) -> tuple[np.ndarray, int]:
-        if options.get("layout") is not None:
-            return validate_layout(options["layout"], self.size), -1
-        if self._layouts is None:
-            return generate_layout(self.size, self.np_random, LOOP_FRACTION), -1
-        if options.get("layout_index") is not None:
-            index = int(options["layout_index"])
-            if not 0 <= index < len(self._layouts):
-                raise IndexError(
-                    f"layout_index {index} out of range for the {self.split!r} split"
-                    f" of {len(self._layouts)} layouts"
-                )
-        else:
-            index = int(self.np_random.integers(len(self._layouts)))
-        return self._layouts[index], index
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -164,21 +118,19 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
         """Start an episode; ``seed`` fixes the layout drawn and everything after it."""
         super().reset(seed=seed)
         options = options or {}
-        cells, index = self._choose_layout(options)
-        start = options.get("start")
-        row, col = (0, 0) if start is None else (int(start[0]), int(start[1]))
-        if not (0 <= row < self.size and 0 <= col < self.size):
-            raise ValueError(f"start {start} is outside the {self.size}x{self.size} maze")
-        self.cells = cells
-        self.layout_index = index
-        self.layout_id = (
-            self._layout_ids[index] if index >= 0 and self._layout_ids else layout_hash(cells)
+        drawn = self._layouts.draw(
+            self.np_random, options.get("layout"), options.get("layout_index")
         )
-        self._background = self.renderer.background(cells)
-        self._walls = state_features(cells)
+        row, col = start_position(options.get("start"), self.size)
+        self.cells, self.layout_index, self.layout_id = drawn.cells, drawn.index, drawn.layout_id
+        # One maze's move table, as the batched kernel wants it: (1, n * n, 4).
+        self._moves = drawn.moves[None]
+        self._background = self.renderer.background(drawn.cells)
+        self._walls = state_features(drawn.cells)
         self.row, self.col = row, col
+        self._cell = row * self.size + col
         info = {"position": np.array([row, col]), "layout_id": self.layout_id,
-                "layout_index": index}
+                "layout_index": drawn.index}
         if self.render_mode == "human":
             self.render()
         return self._observe(), info
@@ -190,15 +142,13 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
         a = int(action)
         if not 0 <= a < 4:
             raise ValueError(f"invalid action {action!r}: expected 0 (N), 1 (S), 2 (E) or 3 (W)")
-        if self.cells[self.row, self.col] & OPEN_BITS[a]:
-            self.row += int(DELTAS[a, 0])
-            self.col += int(DELTAS[a, 1])
-        terminated = (self.row, self.col) == self._goal
-        reward = 1.0 if terminated else self._step_penalty
+        cell, reward, terminated = self._dynamics.step(self._moves, 0, self._cell, a)
+        self._cell = int(cell)
+        self.row, self.col = divmod(self._cell, self.size)
         if self.render_mode == "human":
             self.render()
         info = {"position": np.array([self.row, self.col]), "layout_id": self.layout_id}
-        return self._observe(), reward, terminated, False, info
+        return self._observe(), float(reward), bool(terminated), False, info
 
     def _observe(self) -> np.ndarray:
         if self.obs_type == "image":

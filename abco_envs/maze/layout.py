@@ -1,8 +1,9 @@
 """Maze layouts: the cell encoding, a seeded generator, validation and shortest paths.
 
 A layout is an ``(n, n)`` integer array in gym-maze's encoding: each cell holds the bits of the
-sides it is open to, ``N=1, E=2, S=4, W=8``. Cell ``(0, 0)`` is the top-left corner (the start)
-and ``(n - 1, n - 1)`` the bottom-right one (the goal). Positions are ``(row, col)``.
+sides it is open to, ``N=1, E=2, S=4, W=8`` (named in :mod:`abco_envs.maze.rules`, with the
+other rules). Cell ``(0, 0)`` is the top-left corner (the start) and ``(n - 1, n - 1)`` the
+bottom-right one (the goal). Positions are ``(row, col)``.
 
 Example:
     >>> import numpy as np
@@ -18,9 +19,20 @@ from __future__ import annotations
 
 import hashlib
 from collections import deque
-from enum import IntEnum
 
 import numpy as np
+
+from abco_envs.maze.rules import (
+    DELTAS,
+    OPEN_BITS,
+    OPEN_E,
+    OPEN_N,
+    OPEN_S,
+    OPEN_W,
+    START_POSITION,
+    Action,
+    goal_position,
+)
 
 __all__ = [
     "Action",
@@ -36,19 +48,6 @@ __all__ = [
 ]
 
 
-class Action(IntEnum):
-    """The four moves, in gym-maze's order."""
-
-    N = 0
-    S = 1
-    E = 2
-    W = 3
-
-
-#: gym-maze's side bits, indexed by :class:`Action`.
-OPEN_BITS = np.array([1, 4, 2, 8], dtype=np.uint8)
-#: (d_row, d_col) of each action, indexed by :class:`Action`.
-DELTAS = np.array([(-1, 0), (1, 0), (0, 1), (0, -1)], dtype=np.int64)
 #: The action that undoes each action (N<->S, E<->W).
 _OPPOSITE = np.array([Action.S, Action.N, Action.W, Action.E])
 
@@ -147,25 +146,25 @@ def validate_layout(cells: object, n: int | None = None) -> np.ndarray:
         raise InvalidLayoutError("layout cells must be in 0..15 (bits N=1, E=2, S=4, W=8)")
     out = arr.astype(np.uint8)
     size = out.shape[0]
-    for name, bit, edge in (("N", 1, out[0]), ("S", 4, out[-1]), ("W", 8, out[:, 0]),
-                            ("E", 2, out[:, -1])):
+    for name, bit, edge in (("N", OPEN_N, out[0]), ("S", OPEN_S, out[-1]),
+                            ("W", OPEN_W, out[:, 0]), ("E", OPEN_E, out[:, -1])):
         if np.any(edge & bit):
             raise InvalidLayoutError(f"a border cell is open to the outside on side {name}")
-    east = (out[:, :-1] & 2) > 0
-    west = (out[:, 1:] & 8) > 0
+    east = (out[:, :-1] & OPEN_E) > 0
+    west = (out[:, 1:] & OPEN_W) > 0
     if np.any(east != west):
         r, c = np.argwhere(east != west)[0]
         raise InvalidLayoutError(
             f"inconsistent wall between cells ({r}, {c}) and ({r}, {c + 1}): E and W bits differ"
         )
-    south = (out[:-1, :] & 4) > 0
-    north = (out[1:, :] & 1) > 0
+    south = (out[:-1, :] & OPEN_S) > 0
+    north = (out[1:, :] & OPEN_N) > 0
     if np.any(south != north):
         r, c = np.argwhere(south != north)[0]
         raise InvalidLayoutError(
             f"inconsistent wall between cells ({r}, {c}) and ({r + 1}, {c}): S and N bits differ"
         )
-    dist = distances_to(out, (0, 0))
+    dist = distances_to(out, START_POSITION)
     if np.any(dist < 0):
         r, c = np.argwhere(dist < 0)[0]
         raise InvalidLayoutError(
@@ -177,7 +176,7 @@ def validate_layout(cells: object, n: int | None = None) -> np.ndarray:
 
 def count_passages(cells: np.ndarray) -> int:
     """Number of open walls between neighbouring cells (each counted once)."""
-    return int(np.count_nonzero(cells & 2) + np.count_nonzero(cells & 4))
+    return int(np.count_nonzero(cells & OPEN_E) + np.count_nonzero(cells & OPEN_S))
 
 
 def layout_hash(cells: np.ndarray) -> str:
@@ -206,5 +205,4 @@ def distances_to(cells: np.ndarray, target: tuple[int, int]) -> np.ndarray:
 
 def shortest_path_length(cells: np.ndarray) -> int:
     """Moves on a shortest path from the start (0, 0) to the goal (n-1, n-1)."""
-    n = cells.shape[0]
-    return int(distances_to(cells, (n - 1, n - 1))[0, 0])
+    return int(distances_to(cells, goal_position(cells.shape[0]))[START_POSITION])

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from abco_envs.maze.rules import OPEN_E, OPEN_N, OPEN_S, OPEN_W, START_POSITION, goal_position
+
 __all__ = ["MazeRenderer", "FLOOR", "WALL", "START", "GOAL", "AGENT", "PATH"]
 
 FLOOR = np.array([255, 255, 255], dtype=np.uint8)
@@ -68,21 +70,21 @@ class MazeRenderer:
         img = np.empty((self.height, self.width, 3), dtype=np.uint8)
         img[:] = FLOOR
         rows, cols = self.rows, self.cols
-        img[rows[0] : rows[1], cols[0] : cols[1]] = START
-        img[rows[n - 1] : rows[n], cols[n - 1] : cols[n]] = GOAL
+        for (r, c), colour in ((START_POSITION, START), (goal_position(n), GOAL)):
+            img[rows[r] : rows[r + 1], cols[c] : cols[c + 1]] = colour
         lo, hi = t // 2, t - t // 2
         for r in range(n):
             for c in range(n):
                 y0, y1, x0, x1 = rows[r], rows[r + 1], cols[c], cols[c + 1]
                 # Each wall is drawn by the cell on its north or west side (borders included),
                 # stretched by half a wall at both ends so corners close.
-                if not cells[r, c] & 1:
+                if not cells[r, c] & OPEN_N:
                     img[max(0, y0 - lo) : y0 + hi, max(0, x0 - lo) : x1 + hi] = WALL
-                if not cells[r, c] & 8:
+                if not cells[r, c] & OPEN_W:
                     img[max(0, y0 - lo) : y1 + hi, max(0, x0 - lo) : x0 + hi] = WALL
-                if r == n - 1 and not cells[r, c] & 4:
+                if r == n - 1 and not cells[r, c] & OPEN_S:
                     img[y1 - t : y1, max(0, x0 - lo) : x1] = WALL
-                if c == n - 1 and not cells[r, c] & 2:
+                if c == n - 1 and not cells[r, c] & OPEN_E:
                     img[max(0, y0 - lo) : y1, x1 - t : x1] = WALL
         return img
 

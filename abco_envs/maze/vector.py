@@ -20,21 +20,15 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from abco_envs.maze.env import (
-    _check_options,
-    resolve_image_size,
+from abco_envs.maze.observation import (
+    image_observation_space,
     state_features,
     state_observation_space,
 )
-from abco_envs.maze.layout import (
-    DELTAS,
-    OPEN_BITS,
-    generate_layout,
-    layout_hash,
-    validate_layout,
-)
-from abco_envs.maze.pool import LOOP_FRACTION, layout_pool
+from abco_envs.maze.options import check_env_options, resolve_image_size
 from abco_envs.maze.render import AGENT, MazeRenderer
+from abco_envs.maze.reset import LayoutSource, start_position
+from abco_envs.maze.rules import MAX_EPISODE_STEPS, MazeDynamics
 
 __all__ = ["MazeVectorEnv"]
 
@@ -79,10 +73,10 @@ class MazeVectorEnv(VectorEnv):
         obs_type: str = "image",
         image_size: int | tuple[int, int] = 64,
         split: str = "train",
-        max_episode_steps: int | None = 1000,
+        max_episode_steps: int | None = MAX_EPISODE_STEPS,
         render_mode: str | None = None,
     ) -> None:
-        _check_options(size, obs_type, split)
+        check_env_options(size, obs_type, split)
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
         self.num_envs, self.size, self.obs_type, self.split = num_envs, size, obs_type, split
@@ -92,21 +86,22 @@ class MazeVectorEnv(VectorEnv):
         self.single_action_space = spaces.Discrete(4)
         self.action_space = batch_space(self.single_action_space, num_envs)
         if obs_type == "image":
-            self.single_observation_space = spaces.Box(
-                0, 255, (self.renderer.height, self.renderer.width, 3), dtype=np.uint8
+            self.single_observation_space = image_observation_space(
+                self.renderer.height, self.renderer.width
             )
         else:
             self.single_observation_space = state_observation_space(size)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
 
-        if split != "procedural":
-            pool = layout_pool(size)
-            self._pool, self._pool_ids = pool.split(split), pool.ids(split)
-            self._pool_backgrounds: dict[int, np.ndarray] = {}
+        self._layouts = LayoutSource(size, split)
+        self._dynamics = MazeDynamics(size)
+        self._pool_backgrounds: dict[int, np.ndarray] = {}
         n, h, w = size, self.renderer.height, self.renderer.width
         self._rngs = [seeding.np_random()[0] for _ in range(num_envs)]
         self.cells = np.zeros((num_envs, n, n), dtype=np.uint8)
         self.positions = np.zeros((num_envs, 2), dtype=np.int64)
+        self._cell = np.zeros(num_envs, dtype=np.intp)  # row-major, what the kernel steps
+        self._moves = np.zeros((num_envs, n * n, 4), dtype=np.intp)
         self.layout_ids = np.full(num_envs, None, dtype=object)
         self.layout_indices = np.full(num_envs, -1, dtype=np.int64)
         self._steps = np.zeros(num_envs, dtype=np.int64)
@@ -119,8 +114,6 @@ class MazeVectorEnv(VectorEnv):
         self._frame_bytes = h * w * 3
         self._walls = np.zeros((num_envs, 4 * n * n), dtype=np.float32)
         self._arange = np.arange(num_envs)
-        self._goal = n - 1
-        self._step_penalty = -0.1 / (n * n)
 
     # -- resets -------------------------------------------------------------------------------
 
@@ -133,30 +126,16 @@ class MazeVectorEnv(VectorEnv):
 
     def _reset_one(self, i: int, layout: Any = None, index: Any = None, start: Any = None) -> None:
         """Reset maze ``i`` exactly as ``MazeEnv.reset`` would (same draws from its rng)."""
-        rng = self._rngs[i]
-        if layout is not None:
-            cells, idx, lid = validate_layout(layout, self.size), -1, None
-        elif self.split == "procedural":
-            cells, idx, lid = generate_layout(self.size, rng, LOOP_FRACTION), -1, None
-        else:
-            idx = int(rng.integers(len(self._pool))) if index is None else int(index)
-            if not 0 <= idx < len(self._pool):
-                raise IndexError(
-                    f"layout_index {idx} out of range for the {self.split!r} split"
-                    f" of {len(self._pool)} layouts"
-                )
-            cells, lid = self._pool[idx], self._pool_ids[idx]
-        if lid is None:
-            lid = layout_hash(cells)
-        row, col = (0, 0) if start is None else (int(start[0]), int(start[1]))
-        if not (0 <= row < self.size and 0 <= col < self.size):
-            raise ValueError(f"start {start} is outside the {self.size}x{self.size} maze")
-        self.cells[i] = cells
-        self.layout_indices[i], self.layout_ids[i] = idx, lid
+        drawn = self._layouts.draw(self._rngs[i], layout, index)
+        row, col = start_position(start, self.size)
+        self.cells[i] = drawn.cells
+        self._moves[i] = drawn.moves
+        self.layout_indices[i], self.layout_ids[i] = drawn.index, drawn.layout_id
         self.positions[i] = row, col
+        self._cell[i] = row * self.size + col
         self._steps[i] = 0
-        self._walls[i] = state_features(cells)
-        self._backgrounds[i] = self._background(idx, cells)
+        self._walls[i] = state_features(drawn.cells)
+        self._backgrounds[i] = self._background(drawn.index, drawn.cells)
 
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
@@ -193,25 +172,25 @@ class MazeVectorEnv(VectorEnv):
             self._reset_one(int(i))
         active = ~resetting
 
-        rows, cols = self.positions[:, 0], self.positions[:, 1]
-        is_open = (self.cells[self._arange, rows, cols] & OPEN_BITS[actions]) > 0
-        moved = np.flatnonzero(active & is_open)
-        self.positions[moved] += DELTAS[actions[moved]]
+        next_cell, rewards, at_goal = self._dynamics.step(
+            self._moves, self._arange, self._cell, actions
+        )
+        if resetting.any():  # a maze that resets this step stays on its start
+            next_cell[resetting] = self._cell[resetting]
+            rewards[resetting] = 0.0
+        self._cell = next_cell
+        self.positions[:, 0], self.positions[:, 1] = np.divmod(next_cell, self.size)
         self._steps[active] += 1
 
-        at_goal = (self.positions[:, 0] == self._goal) & (self.positions[:, 1] == self._goal)
         terminated = active & at_goal
         truncated = active & (self._steps >= self.max_episode_steps)
-        rewards = np.where(terminated, 1.0, self._step_penalty)
-        rewards[resetting] = 0.0
         self._needs_reset = terminated | truncated
         return self._observe(), rewards, terminated, truncated, self._infos(resetting)
 
     def _frames(self) -> np.ndarray:
         """Fresh frames of every maze: the backgrounds plus each agent's dot."""
         frames = self._backgrounds.copy()
-        cells = self.positions[:, 0] * self.size + self.positions[:, 1]
-        offsets = self._dot_bytes[cells] + (self._arange * self._frame_bytes)[:, None]
+        offsets = self._dot_bytes[self._cell] + (self._arange * self._frame_bytes)[:, None]
         frames.reshape(-1)[offsets.ravel()] = np.broadcast_to(
             self._dot_colour, offsets.shape
         ).ravel()
