@@ -24,13 +24,15 @@ from abco_data.errors import (
     UnknownDatasetError,
     WrongKindError,
 )
+from abco_data.files import sha256_of
 from abco_data.format import FORMAT_NAME, FORMAT_VERSION
-from abco_data.generate import GENERATOR_VERSION, data_home, generate
+from abco_data.generate import GENERATOR_VERSION, generate
 from abco_data.hub import download, load
+from abco_data.manifest import data_home
 from abco_data.publish import push
 from abco_data.reference import ReferenceReturns
 from abco_data.registry import DATASET_IDS, DatasetSpec, dataset_id, spec
-from abco_data.verify import VerifyReport, sha256_of, verify
+from abco_data.verify import VerifyReport, verify
 
 __version__ = "0.1.0"
 

@@ -27,7 +27,7 @@ __all__ = ["add_subcommands", "main", "build_parser"]
 
 def _manifest_entry(dataset_id: str) -> Any:
     try:
-        from abco_data.hub import read_manifest
+        from abco_data.manifest import read_manifest
 
         return read_manifest().entry(dataset_id)
     except (DatasetError, ImportError):
@@ -35,7 +35,7 @@ def _manifest_entry(dataset_id: str) -> Any:
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
-    from abco_data.generate import data_home
+    from abco_data.manifest import data_home
     from abco_data.registry import DATASET_IDS, spec
 
     home = Path(args.cache_dir) if args.cache_dir else data_home()
@@ -51,7 +51,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 def _cmd_info(args: argparse.Namespace) -> int:
     from abco_data.dataset import open_dataset
-    from abco_data.generate import data_home
+    from abco_data.manifest import data_home
     from abco_data.registry import spec
 
     if Path(args.id).is_file():
@@ -96,8 +96,8 @@ def _parse_overrides(items: Sequence[str]) -> dict[str, Any]:
 
 
 def _cmd_generate(args: argparse.Namespace) -> int:
+    from abco_data.files import sha256_of
     from abco_data.generate import generate
-    from abco_data.verify import sha256_of
 
     start = time.perf_counter()
     path = generate(args.id, args.out, progress=not args.quiet, **_parse_overrides(args.set))

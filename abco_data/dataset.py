@@ -19,8 +19,20 @@ from gymnasium import spaces
 
 from abco_data.errors import CorruptDatasetError, WrongKindError
 from abco_data.format import (
+    ACTIONS,
+    EPISODE_COLUMNS,
+    IDM_EVAL_ACTIONS,
+    POSITIONS,
+    REFERENCE_COLUMNS,
+    REWARDS,
+    TERMINATIONS,
+    TRUNCATIONS,
+    LazyH5File,
     ObservationReader,
+    action_column,
     check_header,
+    episode_column,
+    expected_rows,
     open_h5,
     read_column,
     space_from_json,
@@ -85,14 +97,15 @@ class DatasetArrays:
         return sum(v.nbytes for v in vars(self).values() if isinstance(v, np.ndarray))
 
 
+#: The column of each field of :class:`DatasetArrays` but ``observations``.
 _ARRAY_COLUMNS = {
-    "observations": "observations", "actions": "actions", "idm_eval_actions": "idm_eval_actions",
-    "rewards": "rewards", "terminations": "terminations", "truncations": "truncations",
-    "episode_starts": "episodes/obs_offset", "episode_transition_starts":
-    "episodes/transition_offset", "episode_lengths": "episodes/length",
-    "episode_seeds": "episodes/seed", "episode_returns": "episodes/return",
-    "positions": "positions", "layouts": "episodes/layout",
-    "layout_indices": "episodes/layout_index",
+    "actions": ACTIONS, "idm_eval_actions": IDM_EVAL_ACTIONS, "rewards": REWARDS,
+    "terminations": TERMINATIONS, "truncations": TRUNCATIONS,
+    "episode_starts": episode_column("obs_offset"),
+    "episode_transition_starts": episode_column("transition_offset"),
+    "episode_lengths": episode_column("length"), "episode_seeds": episode_column("seed"),
+    "episode_returns": episode_column("return"), "positions": POSITIONS,
+    "layouts": episode_column("layout"), "layout_indices": episode_column("layout_index"),
 }
 
 
@@ -136,47 +149,30 @@ class Dataset:
     action_space: spaces.Space[Any]
     reference: ReferenceReturns
     _index: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
-    _handle: dict[int, h5py.File] = field(default_factory=dict, repr=False)
-    _readers: dict[int, ObservationReader] = field(default_factory=dict, repr=False)
+    _h5: LazyH5File = field(default=None, repr=False)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        if self._h5 is None:
+            object.__setattr__(self, "_h5", LazyH5File(self.path))
 
     # -- file access -------------------------------------------------------------------------
 
     def _file(self) -> h5py.File:
         """An h5py handle owned by this process (reopened after a fork)."""
-        pid = os.getpid()
-        if pid not in self._handle:
-            self._handle.clear()
-            self._handle[pid] = h5py.File(self.path, "r")
-        return self._handle[pid]
+        return self._h5.file()
 
     def _observations(self) -> ObservationReader:
         """The observations column of this process's handle (palette decoded on read)."""
-        f, pid = self._file(), os.getpid()
-        if pid not in self._readers:
-            self._readers.clear()
-            self._readers[pid] = ObservationReader(f)
-        return self._readers[pid]
+        return self._h5.observations()
 
     def close(self) -> None:
         """Close the file handle (it reopens on the next read)."""
-        self._readers.clear()
-        for f in self._handle.values():
-            f.close()
-        self._handle.clear()
-
-    def __getstate__(self) -> dict[str, Any]:
-        state = dict(vars(self))
-        state["_handle"], state["_readers"] = {}, {}
-        return state
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        for k, v in state.items():
-            object.__setattr__(self, k, v)
+        self._h5.close()
 
     @property
     def is_maze(self) -> bool:
         """Whether episodes carry maze layouts and positions."""
-        return "positions" in self._file()
+        return POSITIONS in self._file()
 
     @property
     def observation_palette(self) -> np.ndarray | None:
@@ -186,13 +182,13 @@ class Dataset:
     @property
     def action_column(self) -> str:
         """``"actions"`` (pre-demonstrations) or ``"idm_eval_actions"`` (expert data)."""
-        return "actions" if self.kind == "pre_demonstrations" else "idm_eval_actions"
+        return action_column(self.kind)
 
     def _episode_index(self) -> dict[str, np.ndarray]:
         if not self._index:
             f = self._file()
-            for key in ("obs_offset", "transition_offset", "length", "seed", "return"):
-                self._index[key] = _read(f[f"episodes/{key}"], self.path)
+            for key in EPISODE_COLUMNS:
+                self._index[key] = _read(f[episode_column(key)], self.path)
         return self._index
 
     # -- episodes -----------------------------------------------------------------------------
@@ -209,15 +205,15 @@ class Dataset:
         i %= self.num_episodes
         idx, f = self._episode_index(), self._file()
         o, t, n = (int(idx[k][i]) for k in ("obs_offset", "transition_offset", "length"))
-        maze = "positions" in f
+        maze = POSITIONS in f
         return Episode(
             index=i, seed=int(idx["seed"][i]), observations=self._read_obs(o, o + n + 1),
-            actions=f["actions"][t : t + n] if self.kind == "pre_demonstrations" else None,
-            rewards=f["rewards"][t : t + n], terminations=f["terminations"][t : t + n],
-            truncations=f["truncations"][t : t + n], episode_return=float(idx["return"][i]),
-            layout=f["episodes/layout"][i] if maze else None,
-            layout_index=int(f["episodes/layout_index"][i]) if maze else None,
-            positions=f["positions"][o : o + n + 1] if maze else None,
+            actions=f[ACTIONS][t : t + n] if self.action_column == ACTIONS else None,
+            rewards=f[REWARDS][t : t + n], terminations=f[TERMINATIONS][t : t + n],
+            truncations=f[TRUNCATIONS][t : t + n], episode_return=float(idx["return"][i]),
+            layout=f[episode_column("layout")][i] if maze else None,
+            layout_index=int(f[episode_column("layout_index")][i]) if maze else None,
+            positions=f[POSITIONS][o : o + n + 1] if maze else None,
         )
 
     def _read_obs(self, start: int, stop: int, out: np.ndarray | None = None) -> np.ndarray:
@@ -242,7 +238,7 @@ class Dataset:
         f = self._file()
         reader = self._observations()
         cols = {name: (_read(f[col], self.path) if col in f else None)
-                for name, col in _ARRAY_COLUMNS.items() if name != "observations"}
+                for name, col in _ARRAY_COLUMNS.items()}
         obs = self._read_obs(0, len(reader), np.empty(reader.shape, dtype=reader.dtype))
         return DatasetArrays(observations=obs, **cols)
 
@@ -274,8 +270,8 @@ class Dataset:
         except OSError as err:
             raise CorruptDatasetError(f"{self.path}: observations cannot be read: {err}") from err
         actions = None
-        if self.kind == "pre_demonstrations":
-            actions = self._file()["actions"][()][items] if items.size else items
+        if self.action_column == ACTIONS:
+            actions = self._file()[ACTIONS][()][items] if items.size else items
         return block[: len(rows)], actions, block[len(rows) :]
 
     def actions_of_transitions(self, *, idm_eval: bool = False) -> np.ndarray:
@@ -328,38 +324,30 @@ class Dataset:
         """A ``torch.utils.data.Dataset`` of transitions (see :mod:`abco_data.torch_view`)."""
         from abco_data.torch_view import TransitionDataset
 
-        return TransitionDataset(self.path, in_memory=in_memory, **kwargs)
+        return TransitionDataset(self, in_memory=in_memory, **kwargs)
 
 
 def _reference(f: h5py.File, attrs: Mapping[str, Any]) -> ReferenceReturns:
-    if "reference/layout_ids" not in f:
-        return ReferenceReturns(float(attrs["reference_expert_mean"]),
-                                float(attrs["reference_random_mean"]))
-    ids = tuple(s.decode() for s in f["reference/layout_ids"][()])
-    splits = tuple(s.decode() for s in f["reference/layout_splits"][()])
-    return ReferenceReturns(
-        float(attrs["reference_expert_mean"]), float(attrs["reference_random_mean"]),
-        ids, splits, f["reference/expert_return"][()], f["reference/random_return"][()])
+    expert_mean = float(attrs["reference_expert_mean"])
+    random_mean = float(attrs["reference_random_mean"])
+    if REFERENCE_COLUMNS[0] not in f:
+        return ReferenceReturns(expert_mean, random_mean)
+    ids, splits, expert, random = (f[c][()] for c in REFERENCE_COLUMNS)
+    return ReferenceReturns(expert_mean, random_mean, tuple(s.decode() for s in ids),
+                            tuple(s.decode() for s in splits), expert, random)
 
 
-def _check_counts(f: h5py.File, attrs: Mapping[str, Any], path: Path, action_col: str) -> None:
+def _check_counts(f: h5py.File, attrs: Mapping[str, Any], path: Path) -> None:
     n_ep, n_tr = attrs["num_episodes"], attrs["num_transitions"]
-    expect = {"observations": n_tr + n_ep, action_col: n_tr, "rewards": n_tr,
-              "terminations": n_tr, "truncations": n_tr}
-    expect.update({f"episodes/{k}": n_ep for k in
-                   ("obs_offset", "transition_offset", "length", "seed", "return")})
-    if "positions" in f:
-        expect.update({"positions": n_tr + n_ep, "episodes/layout": n_ep,
-                       "episodes/layout_index": n_ep})
-    for col, n in expect.items():
+    for col, n in expected_rows(attrs["kind"], n_ep, n_tr, maze=POSITIONS in f).items():
         if col not in f:
             raise CorruptDatasetError(f"{path}: missing column {col}")
         if f[col].shape[0] != n:
             raise CorruptDatasetError(f"{path}: column {col} has {f[col].shape[0]} rows,"
                                       f" expected {n} from the root attributes")
-    lengths = _read(f["episodes/length"], path)
-    starts = _read(f["episodes/transition_offset"], path)
-    obs_starts = _read(f["episodes/obs_offset"], path)
+    lengths = _read(f[episode_column("length")], path)
+    starts = _read(f[episode_column("transition_offset")], path)
+    obs_starts = _read(f[episode_column("obs_offset")], path)
     cum = np.concatenate([[0], np.cumsum(lengths)[:-1]]) if n_ep else lengths
     if (lengths.sum() != n_tr or np.any(lengths < 1) or np.any(starts != cum)
             or np.any(obs_starts != starts + np.arange(n_ep))):
@@ -395,9 +383,7 @@ def open_dataset(path: str | os.PathLike[str], *, dataset_id: str | None = None,
             if dataset_id is not None and attrs["dataset_id"] != dataset_id:
                 raise WrongKindError(f"{path}: holds dataset {attrs['dataset_id']!r},"
                                      f" not {dataset_id!r}")
-            action_col = "actions" if attrs["kind"] == "pre_demonstrations" \
-                else "idm_eval_actions"
-            _check_counts(f, attrs, path, action_col)
+            _check_counts(f, attrs, path)
             reference = _reference(f, attrs)
             obs_space = space_from_json(attrs["observation_space"])
             obs_shape = ObservationReader(f).shape[1:]

@@ -12,12 +12,14 @@
 3. local generation with :func:`abco_data.generate`, whose bytes equal the published ones, so the
    same manifest entry checks them.
 
-Offline (``offline=True`` or ``HF_HUB_OFFLINE=1``) no request is sent: a copy already in the
-huggingface_hub cache is still used, and otherwise the dataset is generated. The Hub endpoint and
-the huggingface_hub cache follow ``HF_ENDPOINT``, ``HF_HOME`` and ``HF_HUB_CACHE`` as they are
-when a function is called. Nothing half-written ever has a cache file's name: every file is
-written under a hidden temporary name in the cache folder and renamed with :func:`os.replace`
-once verified.
+Offline (``offline=True``, or huggingface_hub's offline mode: ``HF_HUB_OFFLINE=1``) no request
+is sent: a copy already in the huggingface_hub cache is still used, and otherwise the dataset is
+generated. The Hub endpoint, the huggingface_hub cache, offline mode and progress bars are
+huggingface_hub's own settings (:mod:`huggingface_hub.constants`: ``HF_ENDPOINT``,
+``HF_HOME``/``HF_HUB_CACHE``, ``HF_HUB_OFFLINE``, ``HF_HUB_DISABLE_PROGRESS_BARS``, read when
+huggingface_hub is imported); abco_data passes none of them itself. Nothing half-written ever
+has a cache file's name: every file is written under a hidden temporary name in the cache
+folder and renamed with :func:`os.replace` once verified.
 
 The manifest and the checks against it live in :mod:`abco_data.manifest`; uploading (for
 maintainers) in :mod:`abco_data.publish`.
@@ -33,29 +35,31 @@ from __future__ import annotations
 import logging
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
 
+from huggingface_hub import constants, hf_hub_download, try_to_load_from_cache
+from huggingface_hub.errors import EntryNotFoundError, HfHubHTTPError, OfflineModeIsEnabled
+from huggingface_hub.utils import httpx, silent_tqdm
+
+from abco_data.dataset import Dataset, open_dataset
 from abco_data.errors import ChecksumError, DatasetNotAvailableError
+from abco_data.files import atomic_target, file_digest
+from abco_data.generate import generate
 from abco_data.manifest import (
     DEFAULT_REPO_ID,
     Manifest,
     ManifestEntry,
-    _as_manifest,
-    _install,
-    _temporary_name,
+    as_manifest,
     cached_path,
     default_cache_dir,
-    file_digest,
+    install_verified,
     known_ids,
     read_manifest,
     verify_file,
 )
 
-if TYPE_CHECKING:  # pragma: no cover - typing only
-    from abco_data import Dataset
-
 __all__ = [
     "DEFAULT_REPO_ID",
+    "HUB_ERRORS",
     "Manifest",
     "ManifestEntry",
     "cached_path",
@@ -63,6 +67,7 @@ __all__ = [
     "download",
     "fetch",
     "file_digest",
+    "hub_location",
     "known_ids",
     "load",
     "read_manifest",
@@ -71,88 +76,22 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-
-# --------------------------------------------------------------------------- huggingface_hub glue
-
-
-def _env_flag(name: str) -> bool | None:
-    value = os.environ.get(name)
-    if value is None or value == "":
-        return None
-    return value.strip().upper() in {"1", "ON", "YES", "TRUE"}
+#: What huggingface_hub raises when it cannot give us a file (not programming errors): HTTP
+#: errors, a file the repo or the cache lacks, offline mode, a transfer its retries could not
+#: finish (its HTTP client's errors, which it re-exports as ``huggingface_hub.utils.httpx``)
+#: and OS-level failures.
+HUB_ERRORS: tuple[type[BaseException], ...] = (
+    HfHubHTTPError, EntryNotFoundError, OfflineModeIsEnabled, httpx.HTTPError, OSError)
 
 
 def _is_offline(offline: bool | None) -> bool:
-    """``offline`` if given, else ``HF_HUB_OFFLINE`` as set now, else huggingface_hub's flag."""
-    if offline is not None:
-        return bool(offline)
-    for name in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE"):
-        flag = _env_flag(name)
-        if flag is not None:
-            return flag
-    from huggingface_hub import constants
-
-    return bool(constants.HF_HUB_OFFLINE)
+    """``offline`` if given, else huggingface_hub's offline mode (``HF_HUB_OFFLINE``)."""
+    return bool(offline) if offline is not None else constants.is_offline_mode()
 
 
-def _hf_endpoint() -> str | None:
-    """``HF_ENDPOINT`` as set now (None: huggingface_hub's own default)."""
-    value = os.environ.get("HF_ENDPOINT")
-    return value.rstrip("/") if value else None
-
-
-def _hf_cache_dir() -> str | None:
-    """The huggingface_hub cache as the environment sets it now (None: its own default)."""
-    for name in ("HF_HUB_CACHE", "HUGGINGFACE_HUB_CACHE"):
-        if os.environ.get(name):
-            return os.path.expanduser(os.path.expandvars(os.environ[name]))
-    if os.environ.get("HF_HOME"):
-        return os.path.join(os.path.expanduser(os.path.expandvars(os.environ["HF_HOME"])), "hub")
-    return None
-
-
-class _SilentBar:
-    """A do-nothing progress bar for ``hf_hub_download(tqdm_class=...)`` when progress=False."""
-
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        self.n = 0
-
-    def __enter__(self) -> _SilentBar:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        return None
-
-    def update(self, n: float | None = 1) -> None:
-        """Ignore progress."""
-
-    def close(self) -> None:
-        """Nothing to close."""
-
-
-def _transfer_errors() -> tuple[type[BaseException], ...]:
-    """Exceptions that mean "the Hub could not give us the file" (not programming errors)."""
-    from huggingface_hub.errors import EntryNotFoundError
-
-    errors: list[type[BaseException]] = [OSError, EntryNotFoundError]
-    for module_name in ("httpx2", "httpx", "requests"):
-        try:
-            module = __import__(module_name)
-        except ImportError:
-            continue
-        base = getattr(module, "HTTPError", None) or getattr(module, "RequestException", None)
-        if isinstance(base, type) and issubclass(base, BaseException):
-            errors.append(base)
-    return tuple(errors)
-
-
-def _hub_location(manifest: Manifest, revision: str | None) -> str:
-    endpoint = _hf_endpoint()
-    if endpoint is None:
-        from huggingface_hub import constants
-
-        endpoint = constants.ENDPOINT
-    return f"{endpoint}/datasets/{manifest.repo_id}@{revision}"
+def hub_location(manifest: Manifest, revision: str | None) -> str:
+    """The dataset repo at ``revision`` on huggingface_hub's endpoint, for messages."""
+    return f"{constants.ENDPOINT}/datasets/{manifest.repo_id}@{revision}"
 
 
 def _hub_file(
@@ -166,33 +105,31 @@ def _hub_file(
     force_download: bool = False,
 ) -> Path:
     """Path of the file in the huggingface_hub cache, downloading it if needed (not verified)."""
-    from huggingface_hub import hf_hub_download
-
     rev = revision or manifest.revision
     if not rev:
         raise DatasetNotAvailableError(
             f"{dataset_id} is not published: the manifest {manifest.path} pins no Hub revision"
         )
-    where = _hub_location(manifest, rev)
     try:
+        # Endpoint and cache are huggingface_hub's own; silent_tqdm is the do-nothing bar it
+        # passes itself where it wants no progress shown.
         local = hf_hub_download(
             repo_id=manifest.repo_id,
             filename=entry.filename,
             repo_type="dataset",
             revision=rev,
-            cache_dir=_hf_cache_dir(),
-            endpoint=_hf_endpoint(),
             local_files_only=local_files_only,
             force_download=force_download,
-            tqdm_class=None if progress else _SilentBar,  # type: ignore[arg-type]
+            tqdm_class=None if progress else silent_tqdm,  # type: ignore[arg-type]
         )
-    except _transfer_errors() as err:
+    except HUB_ERRORS as err:
         if local_files_only:
             reason = "offline and not in the huggingface_hub cache"
         else:
             reason = f"{type(err).__name__}: {str(err).strip().splitlines()[0] if str(err) else ''}"
         raise DatasetNotAvailableError(
-            f"could not get {entry.filename} ({dataset_id}) from the Hub at {where}: {reason}"
+            f"could not get {entry.filename} ({dataset_id}) from the Hub at"
+            f" {hub_location(manifest, rev)}: {reason}"
         ) from err
     return Path(local)
 
@@ -209,12 +146,9 @@ def _evict_hub_copy(path: Path) -> None:
 
 def _in_hub_cache(entry: ManifestEntry, manifest: Manifest, rev: str) -> bool:
     """Whether the huggingface_hub cache already holds the file at ``rev``."""
-    from huggingface_hub import try_to_load_from_cache
-
     found = try_to_load_from_cache(
         repo_id=manifest.repo_id,
         filename=entry.filename,
-        cache_dir=_hf_cache_dir(),
         revision=rev,
         repo_type="dataset",
     )
@@ -238,7 +172,7 @@ def _download_into(
         dataset_id, entry, manifest, revision=revision, progress=progress, local_files_only=offline
     )
     try:
-        return _install(hub_path, target, entry, dataset_id, "downloaded file")
+        return install_verified(hub_path, target, entry, dataset_id, "downloaded file")
     except ChecksumError as err:
         logger.warning("%s; removing it from the huggingface_hub cache", err)
         _evict_hub_copy(hub_path)
@@ -255,7 +189,7 @@ def _download_into(
         force_download=True,
     )
     try:
-        return _install(hub_path, target, entry, dataset_id, "downloaded file")
+        return install_verified(hub_path, target, entry, dataset_id, "downloaded file")
     except ChecksumError:
         _evict_hub_copy(hub_path)
         raise
@@ -265,37 +199,21 @@ def _generate_into(
     dataset_id: str, entry: ManifestEntry | None, target: Path, *, progress: bool
 ) -> Path:
     """Generate ``dataset_id`` locally, verify it, and move it to ``target``."""
-    import abco_data
-
-    generate = getattr(abco_data, "generate", None)
-    if generate is None:
-        raise DatasetNotAvailableError(
-            f"cannot generate {dataset_id} locally: abco_data.generate is not available"
-        )
-    with _temporary_name(target, "generating") as tmp:
-        written = Path(generate(dataset_id, tmp, progress=progress) or tmp)
-        try:
-            if entry is None:
-                size, sha256 = file_digest(written)
-                logger.warning(
-                    "the manifest has no entry for %s: accepting the locally generated file "
-                    "unverified (%d bytes, sha256 %s)",
-                    dataset_id,
-                    size,
-                    sha256,
-                )
-            else:
-                verify_file(
-                    written,
-                    entry,
-                    dataset_id=dataset_id,
-                    what="locally generated file",
-                    shown_as=target,
-                )
-            os.replace(written, target)
-        finally:
-            if written != tmp:
-                written.unlink(missing_ok=True)
+    with atomic_target(target, "generating") as tmp:
+        generate(dataset_id, tmp, progress=progress)
+        if entry is None:
+            size, sha256 = file_digest(tmp)
+            logger.warning(
+                "the manifest has no entry for %s: accepting the locally generated file "
+                "unverified (%d bytes, sha256 %s)",
+                dataset_id,
+                size,
+                sha256,
+            )
+        else:
+            verify_file(
+                tmp, entry, dataset_id=dataset_id, what="locally generated file", shown_as=target
+            )
     logger.info("generated %s into %s", dataset_id, target)
     return target
 
@@ -303,15 +221,9 @@ def _generate_into(
 # --------------------------------------------------------------------------- public API
 
 
-def fetch(
-    dataset_id: str,
-    *,
-    cache_dir: str | os.PathLike[str] | None = None,
-    revision: str | None = None,
-    offline: bool | None = None,
-    progress: bool = True,
-    manifest: Manifest | str | os.PathLike[str] | None = None,
-) -> Path:
+def fetch(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
+          revision: str | None = None, offline: bool | None = None, progress: bool = True,
+          manifest: Manifest | str | os.PathLike[str] | None = None) -> Path:
     """Make sure the abco cache holds a verified copy of ``dataset_id`` and return its path.
 
     Same arguments and order of sources as :func:`load`, which opens the returned file.
@@ -321,7 +233,7 @@ def fetch(
         ChecksumError: The locally generated file differs from the manifest entry.
         DatasetNotAvailableError: No source could provide the dataset.
     """
-    man = _as_manifest(manifest)
+    man = as_manifest(manifest)
     target = cached_path(dataset_id, cache_dir, manifest=man)
     entry = man.entry(dataset_id)
 
@@ -338,15 +250,8 @@ def fetch(
     offline_now = _is_offline(offline)
     if entry is not None:
         try:
-            return _download_into(
-                dataset_id,
-                entry,
-                man,
-                target,
-                revision=revision,
-                progress=progress,
-                offline=offline_now,
-            )
+            return _download_into(dataset_id, entry, man, target, revision=revision,
+                                  progress=progress, offline=offline_now)
         except (DatasetNotAvailableError, ChecksumError) as err:
             logger.warning("%s; generating %s locally instead", err, dataset_id)
     elif not offline_now:
@@ -354,15 +259,9 @@ def fetch(
     return _generate_into(dataset_id, entry, target, progress=progress)
 
 
-def load(
-    dataset_id: str,
-    *,
-    cache_dir: str | os.PathLike[str] | None = None,
-    revision: str | None = None,
-    offline: bool | None = None,
-    progress: bool = True,
-    manifest: Manifest | str | os.PathLike[str] | None = None,
-) -> Dataset:
+def load(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
+         revision: str | None = None, offline: bool | None = None, progress: bool = True,
+         manifest: Manifest | str | os.PathLike[str] | None = None) -> Dataset:
     """Return a dataset from the cache, else the Hub, else local generation.
 
     Args:
@@ -384,27 +283,13 @@ def load(
         ChecksumError: The locally generated file differs from the manifest entry.
         DatasetNotAvailableError: No source could provide the dataset.
     """
-    import abco_data
-
-    path = fetch(
-        dataset_id,
-        cache_dir=cache_dir,
-        revision=revision,
-        offline=offline,
-        progress=progress,
-        manifest=manifest,
-    )
-    return abco_data.open_dataset(path)
+    return open_dataset(fetch(dataset_id, cache_dir=cache_dir, revision=revision,
+                              offline=offline, progress=progress, manifest=manifest))
 
 
-def download(
-    dataset_id: str,
-    *,
-    cache_dir: str | os.PathLike[str] | None = None,
-    revision: str | None = None,
-    progress: bool = True,
-    manifest: Manifest | str | os.PathLike[str] | None = None,
-) -> Path:
+def download(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
+             revision: str | None = None, progress: bool = True,
+             manifest: Manifest | str | os.PathLike[str] | None = None) -> Path:
     """Download ``dataset_id`` from the Hub (never generate), verify it and cache it.
 
     A copy already in the huggingface_hub cache for the pinned revision is used without a
@@ -426,7 +311,7 @@ def download(
             cannot be reached or has no copy.
         ChecksumError: The Hub's file differs from the manifest entry (it is not cached).
     """
-    man = _as_manifest(manifest)
+    man = as_manifest(manifest)
     target = cached_path(dataset_id, cache_dir, manifest=man)
     entry = man.entry(dataset_id)
     if entry is None:
@@ -434,12 +319,5 @@ def download(
             f"{dataset_id} has no published file: the manifest {man.path} has no entry for it "
             "(generate it locally with abco_data.generate or abco_data.load)"
         )
-    return _download_into(
-        dataset_id,
-        entry,
-        man,
-        target,
-        revision=revision,
-        progress=progress,
-        offline=_is_offline(None),
-    )
+    return _download_into(dataset_id, entry, man, target, revision=revision, progress=progress,
+                          offline=_is_offline(None))

@@ -1,4 +1,4 @@
-"""The manifest shipped in the package, and checking files against it.
+"""The abco cache and the manifest shipped in the package: where files go, what their bytes are.
 
 The manifest (``abco_data/manifest.json``, or the file named by ``$ABCO_DATA_MANIFEST`` or by a
 ``manifest`` argument) pins the published files: the dataset repo, its revision, and the size
@@ -15,28 +15,34 @@ generation is deterministic.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 import os
 import re
 import shutil
-import uuid
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from abco_data.errors import ChecksumError, DatasetError, UnknownDatasetError
+from abco_data.files import atomic_target, file_digest
 from abco_data.registry import DATASET_IDS, spec
 
 __all__ = [
+    "CACHE_ENV",
     "DEFAULT_REPO_ID",
+    "MANIFEST_ENV",
     "Manifest",
     "ManifestEntry",
+    "as_manifest",
+    "cache_filename",
     "cached_path",
+    "check_known_id",
+    "data_home",
     "default_cache_dir",
+    "default_manifest_path",
     "file_digest",
+    "install_verified",
     "known_ids",
     "read_manifest",
     "verify_file",
@@ -51,7 +57,6 @@ MANIFEST_ENV = "ABCO_DATA_MANIFEST"
 #: Environment variable naming the abco dataset cache folder.
 CACHE_ENV = "ABCO_DATA_HOME"
 _HEX64 = re.compile(r"[0-9a-f]{64}")
-_READ_CHUNK = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -149,7 +154,8 @@ def read_manifest(path: str | os.PathLike[str] | None = None) -> Manifest:
     return Manifest(revision=revision or None, repo_id=repo_id, files=files, path=manifest_path)
 
 
-def _as_manifest(manifest: Manifest | str | os.PathLike[str] | None) -> Manifest:
+def as_manifest(manifest: Manifest | str | os.PathLike[str] | None) -> Manifest:
+    """``manifest`` itself, or the manifest read from that path (None: the default one)."""
     return manifest if isinstance(manifest, Manifest) else read_manifest(manifest)
 
 
@@ -164,7 +170,8 @@ def known_ids(manifest: Manifest | None = None) -> tuple[str, ...]:
     return tuple(ids)
 
 
-def _check_id(dataset_id: str, manifest: Manifest) -> None:
+def check_known_id(dataset_id: str, manifest: Manifest) -> None:
+    """Raise :class:`UnknownDatasetError` (listing the known ids) for an unknown id."""
     ids = known_ids(manifest)
     if dataset_id not in ids:
         raise UnknownDatasetError(
@@ -172,7 +179,8 @@ def _check_id(dataset_id: str, manifest: Manifest) -> None:
         )
 
 
-def _filename(dataset_id: str, manifest: Manifest) -> str:
+def cache_filename(dataset_id: str, manifest: Manifest) -> str:
+    """The file name of ``dataset_id`` in the cache and in the dataset repo."""
     entry = manifest.entry(dataset_id)
     if entry is not None:
         return entry.filename
@@ -185,6 +193,10 @@ def default_cache_dir() -> Path:
     """``$ABCO_DATA_HOME`` if set, else ``~/.cache/abco/datasets``."""
     override = os.environ.get(CACHE_ENV)
     return Path(override).expanduser() if override else Path.home() / ".cache/abco/datasets"
+
+
+#: The name ``abco_data`` has always exported for :func:`default_cache_dir`.
+data_home = default_cache_dir
 
 
 def cached_path(
@@ -203,24 +215,13 @@ def cached_path(
     Raises:
         UnknownDatasetError: ``dataset_id`` is not a known id (the message lists them).
     """
-    man = _as_manifest(manifest)
-    _check_id(dataset_id, man)
+    man = as_manifest(manifest)
+    check_known_id(dataset_id, man)
     folder = Path(cache_dir).expanduser() if cache_dir is not None else default_cache_dir()
-    return folder / _filename(dataset_id, man)
+    return folder / cache_filename(dataset_id, man)
 
 
 # --------------------------------------------------------------------------- verification
-
-
-def file_digest(path: str | os.PathLike[str]) -> tuple[int, str]:
-    """Return ``(size in bytes, hex sha256)`` of a file, read in 1 MiB chunks."""
-    digest = hashlib.sha256()
-    size = 0
-    with open(path, "rb") as handle:
-        while chunk := handle.read(_READ_CHUNK):
-            digest.update(chunk)
-            size += len(chunk)
-    return size, digest.hexdigest()
 
 
 def verify_file(
@@ -253,26 +254,19 @@ def verify_file(
         )
 
 
-@contextmanager
-def _temporary_name(target: Path, tag: str) -> Iterator[Path]:
-    """A hidden, unique name next to ``target``, removed on exit unless it was renamed."""
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(f".{target.stem}.{uuid.uuid4().hex[:12]}.{tag}{target.suffix}")
-    try:
-        yield tmp
-    finally:
-        tmp.unlink(missing_ok=True)
+def install_verified(source: Path, target: Path, entry: ManifestEntry, dataset_id: str,
+                     what: str) -> Path:
+    """Put a copy of ``source`` at ``target`` once it matches ``entry`` (atomically).
 
+    The copy is a hard link when ``source`` is on the same file system, else a byte copy.
 
-def _install(source: Path, target: Path, entry: ManifestEntry, dataset_id: str, what: str) -> Path:
-    """Put a verified copy of ``source`` at ``target`` (hard link if possible, else a copy)."""
-    with _temporary_name(target, "incoming") as tmp:
+    Raises:
+        ChecksumError: The copy differs from ``entry``; ``target`` was left as it was.
+    """
+    with atomic_target(target, "incoming") as tmp:
         try:
             os.link(os.path.realpath(source), tmp)
         except OSError:
             shutil.copyfile(source, tmp)
         verify_file(tmp, entry, dataset_id=dataset_id, what=what, shown_as=source)
-        os.replace(tmp, target)
     return target
-
-

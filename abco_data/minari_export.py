@@ -1,31 +1,109 @@
-"""Export an abco dataset to Minari's format (optional extra: ``pip install abco[minari]``).
+"""Export an abco dataset to Minari (optional extra: ``pip install abco[minari]``).
 
-Minari's HDF5 storage is a folder ``<datasets root>/<namespace>/<name>-v<N>/data`` holding
-``metadata.json`` (counts, serialized spaces, env spec, versions) and ``main_data.hdf5`` (one
-group ``episode_<i>`` per episode with ``observations`` (T+1), ``actions``, ``rewards``,
-``terminations``, ``truncations``). The export writes exactly that, with images stored
-losslessly (``jpeg_encoding`` false), so ``minari.load_dataset`` reads it.
+The export goes through Minari's public API (:func:`minari.create_dataset_from_buffers` with
+one :class:`minari.data_collector.EpisodeBuffer` per episode), with images stored losslessly
+(``jpeg_encoding=False``), so ``minari.load_dataset`` reads it as any Minari dataset. The
+environment spec recorded is the one the data came from (mazes: with their ``env_kwargs``, so
+``recover_environment()`` gives image observations); importing this module imports
+``abco_envs``, which registers the maze ids.
 
-Minari requires actions. Pre-demonstrations export their ``actions``; expert datasets export
-their ``idm_eval_actions`` (the expert's own actions, which abco keeps apart for measuring IDM
-accuracy): a Minari user must not train an imitation-from-observation method on them.
+Actions: pre-demonstrations export their ``actions``. Expert datasets have no training
+actions, and export none: their Minari action space is the empty ``Box(0,)`` (each step's
+action is an empty array). The expert's own actions, which abco keeps apart for measuring IDM
+accuracy only, are in each episode's ``infos["idm_eval_actions"]``: a Minari user must not
+train an imitation-from-observation method on them.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
-import shutil
-import uuid
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
 
-import h5py
+import gymnasium as gym
+import minari
 import numpy as np
+from gymnasium import spaces
+from minari.data_collector import EpisodeBuffer
+from minari.namespace import create_namespace, list_local_namespaces
 
-from abco_data.dataset import Dataset, open_dataset
+import abco_envs  # noqa: F401  (registers the maze ids that the datasets' env specs name)
+from abco_data.dataset import Dataset, DatasetArrays, open_dataset
+from abco_data.files import atomic_target, remove_path, temporary_name
+from abco_data.format import ACTIONS, IDM_EVAL_ACTIONS
 
-__all__ = ["export_to_minari"]
+__all__ = ["export_to_minari", "NO_ACTIONS"]
+
+#: The Minari action space of an expert export: no action at all.
+NO_ACTIONS = spaces.Box(0, 0, shape=(0,), dtype=np.int64)
+#: Minari reads its datasets root from this variable only.
+_ROOT_ENV = "MINARI_DATASETS_PATH"
+
+
+@contextmanager
+def _minari_root(root: Path) -> Iterator[None]:
+    """Make Minari use ``root`` as its datasets root for the block (and restore it after)."""
+    before = os.environ.get(_ROOT_ENV)
+    os.environ[_ROOT_ENV] = str(root)
+    try:
+        yield
+    finally:
+        if before is None:
+            del os.environ[_ROOT_ENV]
+        else:
+            os.environ[_ROOT_ENV] = before
+
+
+def _buffers(ds: Dataset, a: DatasetArrays) -> Iterator[EpisodeBuffer]:
+    """One episode buffer per episode; expert episodes with no actions (see the module)."""
+    expert = ds.action_column == IDM_EVAL_ACTIONS
+    for e in range(ds.num_episodes):
+        o, t, n = (int(x[e]) for x in (a.episode_starts, a.episode_transition_starts,
+                                       a.episode_lengths))
+        steps = slice(t, t + n)
+        yield EpisodeBuffer(
+            id=e, seed=int(a.episode_seeds[e]), observations=a.observations[o : o + n + 1],
+            actions=(np.empty((n, 0), dtype=np.int64) if expert
+                     else getattr(a, ACTIONS)[steps]),
+            rewards=a.rewards[steps], terminations=a.terminations[steps],
+            truncations=a.truncations[steps],
+            infos={IDM_EVAL_ACTIONS: a.idm_eval_actions[steps]} if expert else None,
+        )
+
+
+def _env_spec(ds: Dataset) -> gym.envs.registration.EnvSpec:
+    """The spec of the env the data came from, with the ``env_kwargs`` it was made with."""
+    base = gym.spec(ds.env_id)
+    kwargs = json.loads(ds.attrs.get("env_kwargs", "{}"))
+    return dataclasses.replace(base, kwargs={**base.kwargs, **kwargs})
+
+
+def _create(ds: Dataset, minari_id: str) -> None:
+    """Create Minari dataset ``minari_id`` under the current Minari root."""
+    expert = ds.action_column == IDM_EVAL_ACTIONS
+    spec = _env_spec(ds)
+    description = (
+        f"abco dataset {ds.id} ({ds.kind}, abco format_version {ds.attrs['format_version']})"
+        f" exported from {ds.path.name}."
+        + (" No actions (expert data for imitation from observation); infos['idm_eval_actions']"
+           " holds the expert's actions, for measuring IDM accuracy only, never for training."
+           if expert else ""))
+    with warnings.catch_warnings():
+        # Minari warns about every optional field left out (permalink, e-mail): noise here.
+        warnings.filterwarnings("ignore", category=UserWarning, module=r"minari\b")
+        minari.create_dataset_from_buffers(
+            minari_id, list(_buffers(ds, ds.load_arrays())), env=spec, eval_env=spec,
+            observation_space=ds.observation_space,
+            action_space=NO_ACTIONS if expert else ds.action_space,
+            algorithm_name="abco expert" if expert else "uniform random policy",
+            author="abco", description=description,
+            ref_min_score=ds.reference.random_mean, ref_max_score=ds.reference.expert_mean,
+            jpeg_encoding=False,
+        )
 
 
 def _datasets_root(root: str | os.PathLike[str] | None) -> Path:
@@ -36,39 +114,13 @@ def _datasets_root(root: str | os.PathLike[str] | None) -> Path:
     return Path(get_dataset_path())
 
 
-def _metadata(ds: Dataset, minari_id: str, size: int) -> dict[str, Any]:
-    import gymnasium as gym
-    import minari
-    from minari.serialization import serialize_space
-
-    expert = ds.kind == "expert"
-    return {
-        "dataset_id": minari_id,
-        "total_episodes": ds.num_episodes,
-        "total_steps": ds.num_transitions,
-        "data_format": "hdf5",
-        "jpeg_encoding": False,
-        "observation_space": serialize_space(ds.observation_space),
-        "action_space": serialize_space(ds.action_space),
-        "env_spec": gym.spec(ds.env_id).to_json(),
-        "minari_version": minari.__version__,
-        "algorithm_name": "abco expert" if expert else "uniform random policy",
-        "author": ["abco"],
-        "description": (
-            f"abco dataset {ds.id} ({ds.kind}) exported from {ds.path.name}."
-            + (" Actions are the expert's idm_eval_actions: for measuring IDM accuracy only,"
-               " not for training imitation from observation." if expert else "")),
-        "ref_max_score": ds.reference.expert_mean,
-        "ref_min_score": ds.reference.random_mean,
-        "dataset_size": round(size / 1e6, 1),
-        "abco_format_version": int(ds.attrs["format_version"]),
-    }
-
-
 def export_to_minari(dataset: Dataset | str | os.PathLike[str], minari_id: str | None = None,
                      *, datasets_root: str | os.PathLike[str] | None = None,
                      overwrite: bool = False) -> Path:
     """Write ``dataset`` as a local Minari dataset; return its ``data`` folder.
+
+    The dataset is created in a hidden folder of the datasets root, then moved into place:
+    an export that fails leaves no half-written dataset.
 
     Args:
         dataset: An opened :class:`~abco_data.dataset.Dataset` or the path of a file.
@@ -83,50 +135,34 @@ def export_to_minari(dataset: Dataset | str | os.PathLike[str], minari_id: str |
     Example:
         >>> import tempfile, os, minari, abco_data
         >>> tmp = tempfile.mkdtemp()
-        >>> path = abco_data.generate("abco/cartpole-pre-v0", os.path.join(tmp, "c.hdf5"),
-        ...     progress=False, transitions=50, reference_episodes=1, reference_expert_episodes=1)
+        >>> path = abco_data.generate("abco/maze3x3-expert-v0", os.path.join(tmp, "m.hdf5"),
+        ...     progress=False, layouts=1, solutions_per_layout=2, reference_episodes=2)
         >>> _ = export_to_minari(path, datasets_root=os.path.join(tmp, "minari"))
         >>> os.environ["MINARI_DATASETS_PATH"] = os.path.join(tmp, "minari")
-        >>> minari.load_dataset("abco/cartpole-pre-v0").total_steps
-        50
+        >>> m = minari.load_dataset("abco/maze3x3-expert-v0")
+        >>> episode = next(m.iterate_episodes())
+        >>> m.action_space, episode.actions.shape[1], sorted(episode.infos)
+        (Box([], [], (0,), int64), 0, ['idm_eval_actions'])
         >>> del os.environ["MINARI_DATASETS_PATH"]
     """
     ds = dataset if isinstance(dataset, Dataset) else open_dataset(dataset)
     minari_id = minari_id or ds.id
-    target = _datasets_root(datasets_root) / minari_id
+    root = _datasets_root(datasets_root)
+    target = root / minari_id
     if target.exists() and not overwrite:
         raise FileExistsError(f"Minari dataset {minari_id} already exists at {target}")
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(f".{target.name}.{uuid.uuid4().hex}.tmp")
-    data = tmp / "data"
-    data.mkdir(parents=True)
+    build_root = temporary_name(root / "export", "minari")
     try:
-        a = ds.load_arrays()
-        actions = a.actions if a.actions is not None else a.idm_eval_actions
-        with h5py.File(data / "main_data.hdf5", "w", track_order=True) as f:
-            for e in range(ds.num_episodes):
-                o, t, n = (int(x[e]) for x in (a.episode_starts, a.episode_transition_starts,
-                                               a.episode_lengths))
-                g = f.create_group(f"episode_{e}")
-                g.attrs["id"] = e
-                g.attrs["seed"] = int(a.episode_seeds[e])
-                g.attrs["total_steps"] = n
-                obs = a.observations[o : o + n + 1]
-                g.create_dataset("observations", data=obs, chunks=True,
-                                 compression="gzip" if obs.ndim > 2 else None)
-                g.create_dataset("actions", data=actions[t : t + n])
-                for key in ("rewards", "terminations", "truncations"):
-                    g.create_dataset(key, data=np.asarray(getattr(a, key)[t : t + n]))
-        size = (data / "main_data.hdf5").stat().st_size
-        (data / "metadata.json").write_text(json.dumps(_metadata(ds, minari_id, size)))
-        if target.exists():
-            shutil.rmtree(target)
-        os.replace(tmp, target)
+        with _minari_root(build_root):
+            _create(ds, minari_id)
+        with atomic_target(target, "minari") as tmp:
+            os.replace(build_root / minari_id, tmp)
+        namespace = minari_id.rpartition("/")[0]
+        with _minari_root(root):
+            if namespace and namespace not in list_local_namespaces():
+                create_namespace(namespace)
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        remove_path(build_root)
         if not isinstance(dataset, Dataset):
             ds.close()
-    namespace_file = target.parent / "namespace_metadata.json"
-    if "/" in minari_id and not namespace_file.exists():
-        namespace_file.write_text("{}")
     return target / "data"

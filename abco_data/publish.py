@@ -9,14 +9,17 @@ import re
 from pathlib import Path
 from typing import Any
 
+from huggingface_hub import CommitOperationAdd, HfApi, hf_hub_download
+
 from abco_data.errors import DatasetNotAvailableError
-from abco_data.hub import _hf_cache_dir, _hf_endpoint, _transfer_errors
+from abco_data.files import file_digest
+from abco_data.format import attr_value, open_h5
+from abco_data.hub import HUB_ERRORS
 from abco_data.manifest import (
     Manifest,
-    _as_manifest,
-    _filename,
+    as_manifest,
+    cache_filename,
     cached_path,
-    file_digest,
     verify_file,
 )
 
@@ -30,20 +33,8 @@ _HEX40 = re.compile(r"[0-9a-f]{40}")
 
 
 def _root_attributes(path: Path) -> dict[str, Any]:
-    import h5py
-    import numpy as np
-
-    def plain(value: Any) -> Any:
-        if isinstance(value, bytes):
-            return value.decode("utf-8", "replace")
-        if isinstance(value, np.ndarray):
-            return [plain(v) for v in value.tolist()]
-        if isinstance(value, np.generic):
-            return value.item()
-        return value
-
-    with h5py.File(path, "r") as handle:
-        return {key: plain(handle.attrs[key]) for key in sorted(handle.attrs)}
+    with open_h5(path) as handle:
+        return {key: attr_value(handle.attrs[key]) for key in sorted(handle.attrs)}
 
 
 def _card_value(value: Any, limit: int = 160) -> str:
@@ -151,16 +142,9 @@ def dataset_card(
     return "\n".join(header + [sections[key] + "\n" for key in sorted(sections)])
 
 
-def push(
-    dataset_id: str,
-    repo_id: str,
-    *,
-    path: str | os.PathLike[str] | None = None,
-    revision: str | None = None,
-    token: str | None = None,
-    create_repo: bool = True,
-    manifest: Manifest | str | os.PathLike[str] | None = None,
-) -> str:
+def push(dataset_id: str, repo_id: str, *, path: str | os.PathLike[str] | None = None,
+         revision: str | None = None, token: str | None = None, create_repo: bool = True,
+         manifest: Manifest | str | os.PathLike[str] | None = None) -> str:
     """Upload a dataset file and its dataset card to a Hub dataset repo (for maintainers).
 
     Both go in one commit: the file under its manifest filename (or ``<name>.hdf5``) and README.md
@@ -183,9 +167,7 @@ def push(
         DatasetNotAvailableError: No file at ``path`` (or in the cache).
         ChecksumError: The file differs from the manifest's entry for the id.
     """
-    from huggingface_hub import CommitOperationAdd, HfApi, hf_hub_download
-
-    man = _as_manifest(manifest)
+    man = as_manifest(manifest)
     cached = cached_path(dataset_id, manifest=man)
     file_path = Path(path).expanduser() if path is not None else cached
     if not file_path.is_file():
@@ -195,10 +177,9 @@ def push(
     entry = man.entry(dataset_id)
     if entry is not None:
         verify_file(file_path, entry, dataset_id=dataset_id, what="file to push")
-    filename = _filename(dataset_id, man)
+    filename = cache_filename(dataset_id, man)
 
-    endpoint = _hf_endpoint()
-    api = HfApi(endpoint=endpoint, token=token)
+    api = HfApi(token=token)  # huggingface_hub's own endpoint (HF_ENDPOINT)
     if create_repo:
         api.create_repo(repo_id, repo_type="dataset", exist_ok=True, token=token)
     previous = None
@@ -209,12 +190,10 @@ def push(
             repo_type="dataset",
             revision=revision,
             token=token,
-            endpoint=endpoint,
-            cache_dir=_hf_cache_dir(),
             force_download=True,
         )
         previous = Path(readme).read_text(encoding="utf-8")
-    except _transfer_errors() as err:
+    except HUB_ERRORS as err:
         logger.info("no dataset card in %s yet (%s): writing a new one", repo_id, err)
     card = dataset_card(dataset_id, file_path, previous=previous, filename=filename)
     operations = [

@@ -21,59 +21,55 @@ Example:
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
-import h5py
 import numpy as np
 import torch
 from torch.utils.data import Dataset as TorchDataset
 
-from abco_data.dataset import open_dataset
-from abco_data.format import ObservationReader
+from abco_data.format import ACTIONS, LazyH5File, ObservationReader
+
+if TYPE_CHECKING:  # typing only: abco_data.dataset imports this module, not the reverse
+    from abco_data.dataset import Dataset
 
 __all__ = ["TransitionDataset"]
 
 
 class TransitionDataset(TorchDataset):
-    """Transitions of one abco dataset file.
+    """Transitions of one abco dataset file (made by ``Dataset.torch_dataset``).
 
     Args:
-        path: The dataset file.
+        dataset: The opened dataset (:func:`abco_data.open_dataset`).
         in_memory: Read every column into memory now instead of reading rows on demand.
         indices: Optional transition indices (e.g. from ``Dataset.sample_by_action``); item
             ``i`` is then transition ``indices[i]``.
         idm_eval_actions: For expert data, yield ``(s, a, s')`` with the expert's actions
             (for measuring IDM accuracy only, never for training).
+
+    Raises:
+        TypeError: ``dataset`` is not an opened dataset (a path, say).
     """
 
-    def __init__(self, path: str | os.PathLike[str], in_memory: bool = False,
+    def __init__(self, dataset: Dataset, in_memory: bool = False,
                  indices: np.ndarray | None = None, idm_eval_actions: bool = False) -> None:
-        ds = open_dataset(path)
-        self.path = Path(path)
-        self.kind = ds.kind
-        self.with_actions = ds.kind == "pre_demonstrations" or idm_eval_actions
-        self.obs_t, _ = ds.transition_index()
-        self.actions = ds.actions_of_transitions(idm_eval=True) if self.with_actions else None
+        if not hasattr(dataset, "transition_index"):
+            raise TypeError(f"TransitionDataset takes an opened dataset, not {dataset!r}: use"
+                            " abco_data.open_dataset(path).torch_dataset()")
+        self.path = dataset.path
+        self.kind = dataset.kind
+        self.with_actions = dataset.action_column == ACTIONS or idm_eval_actions
+        self.obs_t, _ = dataset.transition_index()
+        self.actions = (dataset.actions_of_transitions(idm_eval=True) if self.with_actions
+                        else None)
         self.indices = None if indices is None else np.asarray(indices, dtype=np.int64)
-        self.observations = ds.load_arrays().observations if in_memory else None
-        ds.close()
-        self._file: h5py.File | None = None
-        self._reader: ObservationReader | None = None
-        self._pid = -1
+        self.observations = dataset.load_arrays().observations if in_memory else None
+        self._h5 = LazyH5File(self.path)  # opened by the process that reads (one per worker)
 
     def __len__(self) -> int:
         return len(self.obs_t) if self.indices is None else len(self.indices)
 
-    def _obs(self) -> Any:
-        if self.observations is not None:
-            return self.observations
-        if self._file is None or self._pid != os.getpid():
-            self._file = h5py.File(self.path, "r")  # lazily, in the process that reads
-            self._reader = ObservationReader(self._file)  # decodes a palette on read
-            self._pid = os.getpid()
-        return self._reader
+    def _obs(self) -> np.ndarray | ObservationReader:
+        return self.observations if self.observations is not None else self._h5.observations()
 
     def _rows(self, items: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``s`` and ``s'`` arrays for transition numbers ``items``, one sorted read each."""
@@ -107,14 +103,6 @@ class TransitionDataset(TorchDataset):
         """Batched fetch (used by ``DataLoader``): one sorted read per batch."""
         return self._items(idx)
 
-    def __getstate__(self) -> dict[str, Any]:
-        state = dict(self.__dict__)
-        state["_file"], state["_reader"], state["_pid"] = None, None, -1  # one per worker
-        return state
-
     def close(self) -> None:
         """Close this process's handle, if open."""
-        if self._file is not None:
-            self._reader = None
-            self._file.close()
-            self._file = None
+        self._h5.close()

@@ -17,7 +17,8 @@ import numpy as np
 
 from abco_data.dataset import DatasetArrays, open_dataset
 from abco_data.errors import ChecksumError, CorruptDatasetError
-from abco_data.manifest import file_digest
+from abco_data.files import sha256_of
+from abco_data.format import ObservationReader, open_h5
 from abco_data.palette import unpack4
 
 __all__ = ["VerifyReport", "verify", "sha256_of"]
@@ -46,11 +47,6 @@ class VerifyReport:
     frames_rendered: int
 
 
-def sha256_of(path: str | os.PathLike[str]) -> str:
-    """Hex sha256 of a file (see :func:`abco_data.manifest.file_digest`)."""
-    return file_digest(path)[1]
-
-
 def _check_episode_ends(a: DatasetArrays, path: Path) -> None:
     ends = a.episode_transition_starts + a.episode_lengths - 1
     last = np.zeros(len(a.rewards), dtype=bool)
@@ -65,9 +61,13 @@ def _check_episode_ends(a: DatasetArrays, path: Path) -> None:
         raise CorruptDatasetError(f"{path}: stored episode returns differ from reward sums")
 
 
-def _check_palette(ds, path: Path) -> None:
+def _check_palette(path: Path) -> None:
     """Every palette index of palette-encoded observations names a palette entry."""
-    reader = ds._observations()
+    with open_h5(path) as f:
+        _check_palette_indices(ObservationReader(f), path)
+
+
+def _check_palette_indices(reader: ObservationReader, path: Path) -> None:
     if reader.palette is None:
         return
     k, step = len(reader.palette), 4096
@@ -81,7 +81,7 @@ def _check_palette(ds, path: Path) -> None:
                 f" index {int(block.max())}, but observation_palette has {k} entries")
 
 
-def _render_check(ds, a: DatasetArrays, path: Path) -> int:
+def _render_check(a: DatasetArrays, path: Path) -> int:
     """Re-render every maze frame from layout + position; return how many were compared."""
     from abco_envs.maze.render import MazeRenderer
 
@@ -130,11 +130,11 @@ def verify(path: str | os.PathLike[str], *, sha256: str | None = None,
         if a.observations.dtype != space.dtype or np.any(a.observations < space.low) \
                 or np.any(a.observations > space.high):
             raise CorruptDatasetError(f"{path}: observations outside the observation space")
-        actions = a.actions if a.actions is not None else a.idm_eval_actions
+        actions = getattr(a, ds.action_column)
         if len(actions) and (actions.min() < 0 or actions.max() >= ds.action_space.n):
             raise CorruptDatasetError(f"{path}: actions outside the action space")
-        _check_palette(ds, path)
-        rendered = _render_check(ds, a, path) if a.positions is not None else 0
+        _check_palette(path)
+        rendered = _render_check(a, path) if a.positions is not None else 0
     finally:
         ds.close()
     return VerifyReport(path, ds.id, actual_size, digest, ds.num_episodes,

@@ -1,4 +1,4 @@
-"""Small creation parameters for fast dataset tests (shared by tests/test_data_*.py)."""
+"""Small creation parameters for fast dataset tests (shared by tests/data/test_*.py)."""
 
 from __future__ import annotations
 

@@ -9,7 +9,6 @@ import pytest
 from data_testing import make_small
 
 import abco_data
-from abco_data import format as fmt
 from abco_data.errors import (
     ChecksumError,
     CorruptDatasetError,
@@ -18,6 +17,7 @@ from abco_data.errors import (
     UnknownDatasetError,
     WrongKindError,
 )
+from abco_data.format import writer
 
 
 @pytest.fixture()
@@ -111,7 +111,7 @@ def test_full_disk_leaves_target_untouched(tmp_path, monkeypatch):
     target = make_small("abco/maze3x3-pre-v0", tmp_path)
     before = target.read_bytes()
     calls = {"n": 0}
-    real_flush = fmt._Column.flush
+    real_flush = writer._Column.flush
 
     def flush(self, final):
         calls["n"] += 1
@@ -119,7 +119,7 @@ def test_full_disk_leaves_target_untouched(tmp_path, monkeypatch):
             raise OSError(errno.ENOSPC, "No space left on device")
         return real_flush(self, final)
 
-    monkeypatch.setattr(fmt._Column, "flush", flush)
+    monkeypatch.setattr(writer._Column, "flush", flush)
     with pytest.raises(DatasetWriteError, match="no space left") as err:
         make_small("abco/maze3x3-pre-v0", tmp_path, layouts=1)
     assert err.value.errno == errno.ENOSPC and str(target) in str(err.value)
@@ -131,7 +131,7 @@ def test_interrupted_generation_leaves_nothing(tmp_path, monkeypatch):
     def boom(self, final):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(fmt._Column, "flush", boom)
+    monkeypatch.setattr(writer._Column, "flush", boom)
     with pytest.raises(KeyboardInterrupt):
         make_small("abco/maze3x3-expert-v0", tmp_path)
     assert list(tmp_path.iterdir()) == []

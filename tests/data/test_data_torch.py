@@ -43,7 +43,7 @@ def test_dataloader_workers_match_in_memory(pre):
     memory = pre.torch_dataset(in_memory=True)
     loader = torch.utils.data.DataLoader(lazy, batch_size=16, num_workers=2)
     batches = list(loader)
-    assert lazy._file is None  # the parent never opened a handle: each worker did
+    assert not lazy._h5.is_open  # the parent never opened a handle: each worker did
     s = torch.cat([b[0] for b in batches])
     a = torch.cat([b[1] for b in batches])
     ref = torch.utils.data.default_collate([memory[i] for i in range(len(memory))])

@@ -1,11 +1,12 @@
 """Getting a dataset (abco_data.hub) against a local server speaking the Hub's file endpoints.
 
 Every test runs with a fresh :class:`hub_server.HubServer` on 127.0.0.1, a temporary
-``HF_HOME`` (huggingface_hub cache), ``ABCO_DATA_HOME`` (abco cache) and ``ABCO_DATA_MANIFEST``
-(a manifest written for the test). ``abco_data.hub`` reads ``HF_ENDPOINT``/``HF_HOME``/
-``HF_HUB_OFFLINE`` when called and passes ``endpoint=``/``cache_dir=`` to
-``huggingface_hub.hf_hub_download``, so setting them with monkeypatch is enough; one test also
-runs a subprocess with ``HF_ENDPOINT`` set before anything is imported, as a user would.
+huggingface_hub cache, ``ABCO_DATA_HOME`` (abco cache) and ``ABCO_DATA_MANIFEST`` (a manifest
+written for the test). ``abco_data.hub`` uses huggingface_hub's own settings, which
+``huggingface_hub.constants`` reads from ``HF_ENDPOINT``/``HF_HOME``/``HF_HUB_OFFLINE`` when it
+is imported: in this process the tests patch those constants (:func:`use_endpoint`,
+:func:`use_hf_cache`, :func:`go_offline`), and one test runs a subprocess with ``HF_ENDPOINT``
+set before anything is imported, as a user would.
 """
 
 from __future__ import annotations
@@ -103,6 +104,31 @@ def no_sleep(monkeypatch: pytest.MonkeyPatch) -> _NoSleepTime:
     return fake
 
 
+def use_endpoint(monkeypatch: pytest.MonkeyPatch, url: str) -> None:
+    """Point huggingface_hub at ``url``, as ``HF_ENDPOINT=url`` before its import would."""
+    import huggingface_hub.constants as constants
+
+    monkeypatch.setenv("HF_ENDPOINT", url)  # for subprocesses
+    monkeypatch.setattr(constants, "ENDPOINT", url)
+    monkeypatch.setattr(constants, "HUGGINGFACE_CO_URL_TEMPLATE",
+                        url + "/{repo_id}/resolve/{revision}/{filename}")
+
+
+def use_hf_cache(monkeypatch: pytest.MonkeyPatch, hf_home: Path) -> None:
+    """Use ``hf_home/hub`` as huggingface_hub's cache, as ``HF_HOME=hf_home`` would."""
+    import huggingface_hub.constants as constants
+
+    monkeypatch.setenv("HF_HOME", str(hf_home))  # for subprocesses
+    monkeypatch.setattr(constants, "HF_HUB_CACHE", str(hf_home / "hub"))
+
+
+def go_offline(monkeypatch: pytest.MonkeyPatch) -> None:
+    """huggingface_hub's offline mode, as ``HF_HUB_OFFLINE=1`` before its import would."""
+    import huggingface_hub.constants as constants
+
+    monkeypatch.setattr(constants, "HF_HUB_OFFLINE", True)
+
+
 @pytest.fixture
 def hub_env(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, no_sleep: _NoSleepTime
@@ -125,8 +151,8 @@ def hub_env(
         for name in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE", "HF_HUB_CACHE",
                      "HUGGINGFACE_HUB_CACHE", "HF_TOKEN"):
             monkeypatch.delenv(name, raising=False)
-        monkeypatch.setenv("HF_ENDPOINT", server.url)
-        monkeypatch.setenv("HF_HOME", str(tmp_path / "hf"))
+        use_endpoint(monkeypatch, server.url)
+        use_hf_cache(monkeypatch, tmp_path / "hf")
         monkeypatch.setenv("ABCO_DATA_HOME", str(env.abco_cache))
         monkeypatch.setenv("ABCO_DATA_MANIFEST", str(env.manifest))
         # huggingface_hub read HF_HUB_OFFLINE when it was imported: make sure it is off here.
@@ -137,7 +163,7 @@ def hub_env(
         # give it an empty registry so no test talks to the real Hub.
         import huggingface_hub.utils._detect_agent as detect_agent
 
-        monkeypatch.setattr(detect_agent, "_registry", {}, raising=False)
+        monkeypatch.setattr(detect_agent, "_registry", {})
         yield env
 
 
@@ -173,7 +199,7 @@ def test_download_verifies_and_caches(hub_env: HubEnv) -> None:
 
 def test_load_opens_the_fetched_file(hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch) -> None:
     opened: list[Path] = []
-    monkeypatch.setattr(abco_data, "open_dataset", lambda p: opened.append(Path(p)) or "dataset")
+    monkeypatch.setattr(hub, "open_dataset", lambda p: opened.append(Path(p)) or "dataset")
     assert hub.load(DATASET, progress=False) == "dataset"
     assert opened == [hub_env.abco_cache / FILENAME]
     assert opened[0].read_bytes() == hub_env.data
@@ -187,25 +213,23 @@ def test_second_fetch_is_served_from_cache_without_network(hub_env: HubEnv) -> N
     assert hub_env.server.requests == []
 
 
-def test_progress_false_passes_a_silent_bar(
+def test_progress_false_passes_huggingface_hubs_silent_bar(
     hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import huggingface_hub
+    from huggingface_hub.utils import silent_tqdm
 
     seen: list[Any] = []
-    real = huggingface_hub.hf_hub_download
+    real = hub.hf_hub_download
 
     def spy(*args: Any, **kwargs: Any) -> Any:
         seen.append(kwargs.get("tqdm_class"))
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(huggingface_hub, "hf_hub_download", spy)
+    monkeypatch.setattr(hub, "hf_hub_download", spy)
     hub.download(DATASET, progress=False)
-    assert seen and seen[0] is not None
-    bar = seen[0](total=10)
-    bar.update(5)  # a do-nothing bar: no output, no error
+    assert seen == [silent_tqdm]  # huggingface_hub's own do-nothing bar
     hub.download(DATASET, cache_dir=hub_env.abco_cache / "other", progress=True)
-    assert seen[-1] is None  # huggingface_hub's own bars
+    assert seen[-1] is None  # huggingface_hub's own bars, as it configures them
 
 
 def test_interrupted_download_resumes_and_ends_verified(hub_env: HubEnv) -> None:
@@ -256,7 +280,7 @@ def test_corrupted_file_on_the_hub_falls_back_to_generation(
 ) -> None:
     hub_env.server.set_file(REPO, hub_env.commit, FILENAME, b"x" * len(hub_env.data))
     calls: list[tuple[str, Path]] = []
-    monkeypatch.setattr(abco_data, "generate", fake_generator(hub_env.data, calls), raising=False)
+    monkeypatch.setattr(hub, "generate", fake_generator(hub_env.data, calls))
     with caplog.at_level(logging.WARNING, logger="abco_data.hub"):
         path = hub.fetch(DATASET, progress=False)
     assert [c[0] for c in calls] == [DATASET]
@@ -308,7 +332,7 @@ def test_file_missing_on_the_hub_falls_back_to_generation(
     hub_env.write_manifest(files={OTHER: entry_for("cartpole-pre-v0.hdf5", b"other bytes")})
     with pytest.raises(DatasetNotAvailableError, match="cartpole-pre-v0.hdf5"):
         hub.download(OTHER, progress=False)
-    monkeypatch.setattr(abco_data, "generate", fake_generator(b"other bytes"), raising=False)
+    monkeypatch.setattr(hub, "generate", fake_generator(b"other bytes"))
     path = hub.fetch(OTHER, progress=False)
     assert path.read_bytes() == b"other bytes"
 
@@ -319,10 +343,10 @@ def test_unreachable_hub_falls_back_to_generation(
     with socket.socket() as probe:  # a port nothing listens on
         probe.bind(("127.0.0.1", 0))
         dead = f"http://127.0.0.1:{probe.getsockname()[1]}"
-    monkeypatch.setenv("HF_ENDPOINT", dead)
+    use_endpoint(monkeypatch, dead)
     with pytest.raises(DatasetNotAvailableError, match="127.0.0.1"):
         hub.download(DATASET, progress=False)
-    monkeypatch.setattr(abco_data, "generate", fake_generator(hub_env.data), raising=False)
+    monkeypatch.setattr(hub, "generate", fake_generator(hub_env.data))
     assert hub.fetch(DATASET, progress=False).read_bytes() == hub_env.data
     assert hub_env.server.requests == []
 
@@ -333,7 +357,7 @@ def test_unreachable_hub_falls_back_to_generation(
 def test_offline_serves_the_abco_cache(hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch) -> None:
     path = hub.fetch(DATASET, progress=False)
     hub_env.server.reset_requests()
-    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    go_offline(monkeypatch)
     assert hub.fetch(DATASET, progress=False) == path
     assert hub_env.server.requests == []
 
@@ -344,8 +368,8 @@ def test_offline_serves_the_huggingface_hub_cache(
     hub.download(DATASET, progress=False)
     (hub_env.abco_cache / FILENAME).unlink()
     hub_env.server.reset_requests()
-    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
-    monkeypatch.setattr(abco_data, "generate", fake_generator(b"must not be used"), raising=False)
+    go_offline(monkeypatch)
+    monkeypatch.setattr(hub, "generate", fake_generator(b"must not be used"))
     path = hub.fetch(DATASET, progress=False)
     assert path.read_bytes() == hub_env.data
     assert hub_env.server.requests == []
@@ -355,7 +379,7 @@ def test_offline_with_nothing_generates(
     hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     calls: list[tuple[str, Path]] = []
-    monkeypatch.setattr(abco_data, "generate", fake_generator(hub_env.data, calls), raising=False)
+    monkeypatch.setattr(hub, "generate", fake_generator(hub_env.data, calls))
     path = hub.fetch(DATASET, offline=True, progress=False)
     assert path.read_bytes() == hub_env.data
     # Generated under a hidden temporary name in the cache folder, then renamed.
@@ -368,7 +392,7 @@ def test_offline_with_nothing_generates(
 def test_generated_file_that_differs_raises_checksum_error(
     hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(abco_data, "generate", fake_generator(b"not it"), raising=False)
+    monkeypatch.setattr(hub, "generate", fake_generator(b"not it"))
     with pytest.raises(ChecksumError, match="locally generated file"):
         hub.fetch(DATASET, offline=True, progress=False)
     assert hub_env.abco_files() == []
@@ -378,7 +402,7 @@ def test_dataset_missing_from_manifest_is_generated_and_logged(
     hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
     hub_env.write_manifest(files={})
-    monkeypatch.setattr(abco_data, "generate", fake_generator(b"fresh"), raising=False)
+    monkeypatch.setattr(hub, "generate", fake_generator(b"fresh"))
     with caplog.at_level(logging.INFO, logger="abco_data.hub"):
         path = hub.fetch(DATASET, progress=False)
     assert path.read_bytes() == b"fresh"
@@ -433,7 +457,7 @@ def test_subprocess_with_hf_endpoint_set_before_import(hub_env: HubEnv) -> None:
     done = subprocess.run(
         [sys.executable, "-c", code],
         env=env,
-        cwd=Path(__file__).resolve().parents[1],
+        cwd=Path(__file__).resolve().parents[2],
         capture_output=True,
         text=True,
         timeout=120,
@@ -528,10 +552,8 @@ def test_load_end_to_end_with_the_real_generator(
 
     # Offline with empty caches: the generator (same overrides) rebuilds the same bytes.
     (hub_env.abco_cache / filename).unlink()
-    monkeypatch.setenv("HF_HOME", str(tmp_path / "empty-hf"))
-    monkeypatch.setattr(
-        abco_data, "generate", functools.partial(abco_data.generate, **overrides)
-    )
+    use_hf_cache(monkeypatch, tmp_path / "empty-hf")
+    monkeypatch.setattr(hub, "generate", functools.partial(abco_data.generate, **overrides))
     hub_env.server.reset_requests()
     regenerated = hub.load(dataset_id, offline=True, progress=False)
     assert Path(regenerated.path).read_bytes() == data

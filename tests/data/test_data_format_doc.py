@@ -10,9 +10,21 @@ import pytest
 from data_testing import make_small
 
 import abco_data
-from abco_data.format import REQUIRED_ROOT_ATTRS, space_from_json, space_to_json
+from abco_data.format import (
+    ACTION_COLUMNS,
+    EPISODE_COLUMNS,
+    FLAT_COLUMNS,
+    MAZE_EPISODE_COLUMNS,
+    PALETTE,
+    POSITIONS,
+    REFERENCE_COLUMNS,
+    REQUIRED_ROOT_ATTRS,
+    episode_column,
+    space_from_json,
+    space_to_json,
+)
 
-DOC = Path(__file__).resolve().parents[1] / "docs" / "format.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "format.md"
 
 
 def _table(heading: str) -> list[list[str]]:
@@ -37,6 +49,18 @@ def _decoded(path) -> np.ndarray:
 
 def _name(cell: str) -> str:
     return re.search(r"`([^`]+)`", cell).group(1)
+
+
+def test_documented_names_are_the_schemas():
+    """The tables name exactly the columns of abco_data.format.schema."""
+    flat = {_name(r[0]) for r in _table("### Flat columns")}
+    assert flat == {*FLAT_COLUMNS, *ACTION_COLUMNS.values(), PALETTE, POSITIONS}
+    per_episode = {_name(r[0]) for r in _table("### Per-episode columns")}
+    assert per_episode == {episode_column(c) for c in EPISODE_COLUMNS + MAZE_EPISODE_COLUMNS}
+    assert {_name(r[0]) for r in _table("### Reference returns")} == set(REFERENCE_COLUMNS)
+    rows = {_name(r[0]): " ".join(r[2:]) for r in _table("### Flat columns")}
+    for kind, column in ACTION_COLUMNS.items():
+        assert f"`{kind}` only" in rows[column]
 
 
 @pytest.fixture(scope="module", params=["abco/maze3x3-pre-v0", "abco/maze3x3-expert-v0",

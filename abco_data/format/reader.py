@@ -1,0 +1,210 @@
+"""Reading a dataset file: :func:`open_h5`, the lazy per-process handle, column readers.
+
+:class:`ObservationReader` decodes palette-encoded observations transparently;
+:class:`LazyH5File` is the one read handle of a :class:`~abco_data.dataset.Dataset` or a torch
+view, opened on first use in the process that reads (h5py handles must not cross a fork).
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from abco_data.errors import CorruptDatasetError
+from abco_data.format.schema import OBSERVATION_ENCODINGS, OBSERVATIONS, PALETTE, attr_value
+from abco_data.palette import MAX_COLOURS, PaletteDecoder
+
+__all__ = ["open_h5", "read_column", "read_rows", "ObservationReader", "LazyH5File"]
+
+
+def read_column(ds: h5py.Dataset, out: np.ndarray) -> None:
+    """Read all of ``ds`` into the preallocated ``out`` (no intermediate copy)."""
+    if out.size:
+        ds.read_direct(out)
+
+
+def read_rows(ds: h5py.Dataset, rows: np.ndarray) -> np.ndarray:
+    """Rows ``rows`` of ``ds`` (any order, repeats allowed), each needed chunk read once.
+
+    Reads whole chunks as slices instead of one HDF5 point selection per row, which h5py
+    handles slowly (1,000 random frames: about 0.16 s instead of 2 s).
+    """
+    rows = np.asarray(rows, dtype=np.int64)
+    out = np.empty((len(rows), *ds.shape[1:]), dtype=ds.dtype)
+    n = ds.chunks[0] if ds.chunks is not None else max(1, len(ds))
+    chunk_of = rows // n
+    for c in np.unique(chunk_of):
+        block = ds[int(c) * n : (int(c) + 1) * n]
+        hit = chunk_of == c
+        out[hit] = block[rows[hit] - int(c) * n]
+    return out
+
+
+class ObservationReader:
+    """Reads the ``observations`` column of an open file, decoding a palette transparently.
+
+    Args:
+        f: An open abco dataset file.
+
+    Raises:
+        CorruptDatasetError: An unknown ``observation_encoding`` or a malformed palette.
+    """
+
+    #: Chunks inflated (then decoded) per step of a long read.
+    BLOCK_CHUNKS = 4
+
+    def __init__(self, f: h5py.File) -> None:
+        self.ds = f[OBSERVATIONS]
+        self.encoding = attr_value(f.attrs.get("observation_encoding", "raw"))
+        self.decoder: PaletteDecoder | None = None
+        if self.encoding in ("palette", "palette4"):
+            if PALETTE not in f:
+                raise CorruptDatasetError(f"{f.filename}: observation_encoding is"
+                                          f" {self.encoding!r} but the {PALETTE} dataset is"
+                                          " missing")
+            palette = f[PALETTE][()]
+            if (palette.dtype != np.uint8 or palette.ndim != 2 or palette.shape[1] != 3
+                    or len(palette) > MAX_COLOURS or self.ds.dtype != np.uint8):
+                raise CorruptDatasetError(
+                    f"{f.filename}: malformed {PALETTE} {palette.shape} {palette.dtype} for"
+                    f" observations of {self.ds.dtype}")
+            self.decoder = PaletteDecoder(palette, packed=self.encoding == "palette4")
+        elif self.encoding != "raw":
+            raise CorruptDatasetError(f"{f.filename}: unknown observation_encoding"
+                                      f" {self.encoding!r}; expected one of"
+                                      f" {OBSERVATION_ENCODINGS}")
+        self.shape = self.ds.shape if self.decoder is None else \
+            self.decoder.out_shape(self.ds.shape)
+        self.dtype = np.dtype(np.uint8) if self.decoder is not None else self.ds.dtype
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    @property
+    def palette(self) -> np.ndarray | None:
+        """The ``(K, 3)`` palette, or None for raw observations."""
+        return None if self.decoder is None else self.decoder.palette
+
+    def read(self, start: int = 0, stop: int | None = None,
+             out: np.ndarray | None = None) -> np.ndarray:
+        """Rows ``start:stop`` decoded, into ``out`` if given (a contiguous array)."""
+        stop = len(self) if stop is None else min(stop, len(self))
+        start = min(start, stop)
+        if out is None:
+            out = np.empty((stop - start, *self.shape[1:]), dtype=self.dtype)
+        if stop == start:
+            return out
+        if self.decoder is None:
+            self.ds.read_direct(out, np.s_[start:stop], np.s_[0 : stop - start])
+            return out
+        # A few chunks at a time into one small buffer, decoded straight into ``out``: the
+        # only memory beyond ``out`` is that buffer and the decoder's ~1 MB gather buffer.
+        step = self.BLOCK_CHUNKS * (self.ds.chunks[0] if self.ds.chunks else stop - start)
+        buf = np.empty((min(step, stop - start), *self.ds.shape[1:]), dtype=self.ds.dtype)
+        for a in range(start, stop, step):
+            b = min(a + step, stop)
+            self.ds.read_direct(buf, np.s_[a:b], np.s_[0 : b - a])
+            self.decoder.decode_into(buf[: b - a], out[a - start : b - start])
+        return out
+
+    def rows(self, rows: np.ndarray) -> np.ndarray:
+        """Rows ``rows`` (any order, repeats allowed) decoded; see :func:`read_rows`."""
+        block = read_rows(self.ds, rows)
+        return block if self.decoder is None else self.decoder.decode(block)
+
+    def __getitem__(self, key: slice) -> np.ndarray:
+        start, stop, stride = key.indices(len(self))
+        if stride != 1:
+            raise IndexError("observations: only contiguous slices are supported")
+        return self.read(start, stop)
+
+
+
+@contextmanager
+def open_h5(path: str | os.PathLike[str]) -> Iterator[h5py.File]:
+    """Open ``path`` read-only, turning HDF5's errors into ones that name the file.
+
+    Raises:
+        FileNotFoundError: No file at ``path``.
+        CorruptDatasetError: Not an HDF5 file, or truncated.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(errno.ENOENT, "no dataset file", str(path))
+    try:
+        f = h5py.File(path, "r")
+    except OSError as err:
+        raise CorruptDatasetError(
+            f"{path}: not a readable HDF5 file (truncated or corrupt): {err}") from err
+    try:
+        yield f
+    finally:
+        f.close()
+
+
+
+class LazyH5File:
+    """A read-only h5py handle on ``path``, opened on first use by the process that uses it.
+
+    After a fork (a ``DataLoader`` worker) the child opens its own handle instead of using
+    the parent's; pickling drops the handle. :meth:`close` closes it; the next use reopens.
+
+    Args:
+        path: The dataset file.
+
+    Example:
+        >>> import tempfile, os, h5py, numpy as np
+        >>> path = os.path.join(tempfile.mkdtemp(), "x.h5")
+        >>> with h5py.File(path, "w") as f:
+        ...     f["observations"] = np.arange(3)
+        >>> handle = LazyH5File(path)
+        >>> handle.is_open, int(handle.file()["observations"][2]), handle.is_open
+        (False, 2, True)
+        >>> handle.observations().read().tolist()
+        [0, 1, 2]
+        >>> handle.close(); handle.is_open
+        False
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        self._file: h5py.File | None = None
+        self._reader: ObservationReader | None = None
+        self._pid = -1
+
+    @property
+    def is_open(self) -> bool:
+        """Whether this process holds an open handle."""
+        return self._file is not None and self._pid == os.getpid()
+
+    def file(self) -> h5py.File:
+        """The handle of this process, opened now if needed."""
+        if not self.is_open:
+            # A handle inherited over a fork belongs to the parent: forget it, never close it.
+            self._file, self._reader = None, None
+            self._file = h5py.File(self.path, "r")
+            self._pid = os.getpid()
+        return self._file
+
+    def observations(self) -> ObservationReader:
+        """The observations column of this process's handle (a palette decoded on read)."""
+        f = self.file()
+        if self._reader is None:
+            self._reader = ObservationReader(f)
+        return self._reader
+
+    def close(self) -> None:
+        """Close this process's handle, if open."""
+        f, self._file, self._reader = self._file if self.is_open else None, None, None
+        if f is not None:
+            f.close()
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"path": self.path, "_file": None, "_reader": None, "_pid": -1}

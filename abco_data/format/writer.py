@@ -1,0 +1,227 @@
+"""Writing a dataset file: :class:`DatasetWriter`, atomic, chunk by chunk, deterministic.
+
+Columns are created on first append and grow in whole chunks, so a column's bytes depend only
+on its contents. RGB ``uint8`` observations are stored palette-encoded while their frames
+allow it (see :mod:`abco_data.palette`).
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+from contextlib import AbstractContextManager
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from abco_data.errors import DatasetWriteError
+from abco_data.files import atomic_target
+from abco_data.format.schema import (
+    GZIP_LEVEL,
+    IMAGE_GZIP_LEVEL,
+    OBSERVATIONS,
+    PALETTE,
+    chunk_rows,
+)
+from abco_data.palette import (
+    MAX_COLOURS_4BIT,
+    PaletteDecoder,
+    PaletteEncoder,
+    is_palette_candidate,
+    pack4,
+    unpack4,
+)
+
+__all__ = ["DatasetWriter"]
+
+
+class _Column:
+    """A resizable, chunked, gzip-compressed dataset written a whole chunk at a time.
+
+    With ``palette`` (RGB ``uint8`` frames), rows are stored as palette indices (see
+    :mod:`abco_data.palette`): packed two per byte (``palette4``) while the frames have at
+    most 16 colours and an even width, one per byte (``palette``) up to 256 colours, raw
+    beyond; on a change the rows already written are rewritten in the new encoding.
+    """
+
+    def __init__(self, group: h5py.Group, name: str, row_shape: tuple[int, ...], dtype: Any,
+                 palette: bool = False):
+        self.group, self.name, self.row_shape = group, name, tuple(row_shape)
+        self.dtype = np.dtype(dtype)
+        self.rows = chunk_rows(row_shape, dtype)
+        self.encoder = PaletteEncoder() if palette else None
+        self.encoding = "raw"
+        if palette:
+            self.encoding = "palette4" if self.row_shape[1] % 2 == 0 else "palette"
+        self.ds = self._create()
+        self.pending: list[np.ndarray] = []
+        self.pending_rows = 0
+        self.size = 0
+
+    def _create(self) -> h5py.Dataset:
+        shape = self.row_shape
+        if self.encoding == "palette":
+            shape = shape[:-1]
+        elif self.encoding == "palette4":
+            shape = (shape[0], shape[1] // 2)
+        level = IMAGE_GZIP_LEVEL if len(self.row_shape) >= 2 else GZIP_LEVEL
+        return self.group.create_dataset(
+            self.name, shape=(0, *shape), maxshape=(None, *shape), dtype=self.dtype,
+            chunks=(self.rows, *shape), compression="gzip", compression_opts=level,
+            track_times=False,
+        )
+
+    def append(self, rows: np.ndarray) -> None:
+        if len(rows):
+            self.pending.append(np.asarray(rows, dtype=self.dtype))
+            self.pending_rows += len(rows)
+        if self.pending_rows >= 8 * self.rows:
+            self.flush(final=False)
+
+    def _store(self, block: np.ndarray) -> None:
+        if self.encoder is not None:
+            indices = self.encoder.encode(block)
+            if indices is None:
+                self._rewrite("raw")
+            else:
+                if self.encoding == "palette4" and len(self.encoder) > MAX_COLOURS_4BIT:
+                    self._rewrite("palette")
+                block = pack4(indices) if self.encoding == "palette4" else indices
+        start = self.size
+        self.ds.resize((start + len(block), *self.ds.shape[1:]))
+        self.ds[start:] = block
+        self.size += len(block)
+
+    def _rewrite(self, encoding: str) -> None:
+        """Rewrite the rows written so far in ``encoding`` (the palette outgrew the old one)."""
+        data = self.ds[: self.size]
+        if self.encoding == "palette4":
+            data = unpack4(data)
+        if encoding == "raw":
+            data = PaletteDecoder(self.encoder.palette).decode(data)
+            self.encoder = None
+        del self.group[self.name]
+        self.encoding = encoding
+        self.ds = self._create()
+        self.ds.resize((self.size, *self.ds.shape[1:]))
+        if self.size:
+            self.ds[:] = data
+
+    def flush(self, final: bool) -> None:
+        if not self.pending_rows:
+            return
+        block = np.concatenate(self.pending)
+        keep = len(block) if final else len(block) - len(block) % self.rows
+        self._store(block[:keep])
+        rest = block[keep:]
+        self.pending, self.pending_rows = ([rest] if len(rest) else []), len(rest)
+
+
+
+class DatasetWriter:
+    """Writes one dataset file atomically: a temp file next to the target, then ``os.replace``.
+
+    Use as a context manager. Columns are created on first append and grow in whole chunks,
+    so a column's bytes depend only on its contents. An ``observations`` column of RGB
+    ``uint8`` frames is stored palette-encoded (with an ``observation_palette`` dataset) while
+    its frames have at most 256 colours (indices packed two per byte up to 16 colours); the
+    root attribute ``observation_encoding`` says which (``"palette4"``, ``"palette"`` or
+    ``"raw"``). Nothing reaches ``path`` unless the block
+    exits normally; on any error the temp file is removed and ``path`` is left untouched. A
+    full disk (or any ``OSError``) surfaces as :class:`~abco_data.errors.DatasetWriteError`.
+
+    Args:
+        path: The target file.
+
+    Example:
+        >>> import tempfile, os, numpy as np, h5py
+        >>> target = os.path.join(tempfile.mkdtemp(), "x.hdf5")
+        >>> with DatasetWriter(target) as w:
+        ...     w.append("rewards", np.zeros(3))
+        ...     w.attrs["format"] = "abco-dataset"
+        >>> with h5py.File(target) as f:
+        ...     f["rewards"].shape, f.attrs["format"]
+        ((3,), 'abco-dataset')
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        self.attrs: dict[str, Any] = {}
+        self._columns: dict[str, _Column] = {}
+
+    def __enter__(self) -> DatasetWriter:
+        # h5py creates the temporary file, so the final one gets the umask's usual permissions.
+        self._target: AbstractContextManager[Path] = atomic_target(self.path, "writing")
+        self.tmp = self._target.__enter__()
+        try:
+            self.file = h5py.File(self.tmp, "w-", libver="earliest", track_order=False)
+        except BaseException as err:
+            self._target.__exit__(type(err), err, err.__traceback__)
+            if isinstance(err, OSError):
+                raise self._write_error(err) from err
+            raise
+        return self
+
+    def _write_error(self, err: OSError) -> DatasetWriteError:
+        what = "no space left on device" if err.errno == errno.ENOSPC else str(err)
+        return DatasetWriteError(
+            err.errno or errno.EIO, f"could not write dataset {self.path}: {what};"
+            " the target was left unchanged", str(self.path))
+
+    def _group(self, name: str) -> tuple[h5py.Group, str]:
+        if "/" not in name:
+            return self.file, name
+        parent, leaf = name.rsplit("/", 1)
+        group = self.file[parent] if parent in self.file else self.file.create_group(parent)
+        return group, leaf
+
+    def append(self, name: str, rows: np.ndarray) -> None:
+        """Append rows to column ``name`` (``"group/name"`` for a column in a group)."""
+        rows = np.asarray(rows)
+        if name not in self._columns:
+            group, leaf = self._group(name)
+            palette = name == OBSERVATIONS and is_palette_candidate(rows.shape[1:], rows.dtype)
+            self._columns[name] = _Column(group, leaf, rows.shape[1:], rows.dtype, palette)
+        self._columns[name].append(rows)
+
+    def write(self, name: str, data: np.ndarray) -> None:
+        """Write a whole small array (uncompressed) as dataset ``name``."""
+        group, leaf = self._group(name)
+        data = np.asarray(data)
+        if data.dtype.kind == "U":
+            data = data.astype(h5py.string_dtype())
+        group.create_dataset(leaf, data=data, track_times=False)
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        try:
+            try:
+                if exc_type is None:
+                    self._finish()
+            finally:
+                self.file.close()
+        except BaseException as err:
+            # The temporary goes; an OSError (a full disk, say) becomes a DatasetWriteError.
+            self._target.__exit__(type(err), err, err.__traceback__)
+            if isinstance(err, OSError):
+                raise self._write_error(err) from err
+            raise
+        try:
+            self._target.__exit__(exc_type, exc, tb)  # moves the file into place on success
+        except OSError as err:
+            raise self._write_error(err) from err
+        if isinstance(exc, OSError) and not isinstance(exc, DatasetWriteError):
+            raise self._write_error(exc) from exc
+
+    def _finish(self) -> None:
+        """Flush the columns' last rows, the palette and the root attributes (sorted)."""
+        for column in self._columns.values():
+            column.flush(final=True)
+        obs = self._columns.get(OBSERVATIONS)
+        if obs is not None:
+            self.attrs["observation_encoding"] = obs.encoding
+            if obs.encoding != "raw":
+                self.write(PALETTE, obs.encoder.palette)
+        for key in sorted(self.attrs):
+            self.file.attrs[key] = self.attrs[key]
