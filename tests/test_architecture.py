@@ -1,5 +1,6 @@
 """The shape of the code: layers envs -> data -> train, no import cycles, no private names
-imported across modules. Read from the source with ``ast`` (imports inside functions count)."""
+imported across modules. Read from the source with ``ast``: imports inside functions count;
+imports under ``if TYPE_CHECKING:`` (annotations only, never executed) do not."""
 
 from __future__ import annotations
 
@@ -39,6 +40,11 @@ def _imports(module: str) -> list[tuple[str, str | None]]:
     tree = ast.parse(MODULES[module].read_text())
     is_package = MODULES[module].name == "__init__.py"
     out: list[tuple[str, str | None]] = []
+    for block in [n for n in ast.walk(tree) if isinstance(n, ast.If)]:
+        test = block.test
+        if isinstance(test, ast.Name) and test.id == "TYPE_CHECKING" or \
+                isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING":
+            block.body = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             out += [(m, None) for a in node.names if (m := _resolve(a.name))]
