@@ -135,7 +135,10 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
         # One maze's move table, as the batched kernel wants it: (1, n * n, 4).
         self._moves = drawn.moves[None]
         self._background = self.renderer.background(drawn.cells)
-        self._walls = state_features(drawn.cells)
+        # The state vector's walls part, behind zero one-hots: a step copies it and sets two.
+        self._state_background = np.concatenate(
+            [np.zeros(2 * self.size, dtype=np.float32), state_features(drawn.cells)]
+        )
         self.row, self.col = row, col
         self._cell = row * self.size + col
         info = {"position": np.array([row, col]), "layout_id": self.layout_id,
@@ -160,11 +163,9 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
     def _observe(self) -> np.ndarray:
         if self.obs_type == "image":
             return self.renderer.draw_agent(self._background.copy(), self.row, self.col)
-        n = self.size
-        obs = np.zeros(2 * n + 4 * n * n, dtype=np.float32)
+        obs = self._state_background.copy()
         obs[self.row] = 1.0
-        obs[n + self.col] = 1.0
-        obs[2 * n :] = self._walls
+        obs[self.size + self.col] = 1.0
         return obs
 
     # -- rendering ----------------------------------------------------------------------------

@@ -35,7 +35,7 @@ from abco_envs.maze.options import (
     is_integer,
     resolve_image_size,
 )
-from abco_envs.maze.render import AGENT, MazeRenderer
+from abco_envs.maze.render import MazeRenderer
 from abco_envs.maze.reset import DrawnLayout, LayoutSource
 from abco_envs.maze.rules import MAX_EPISODE_STEPS, START_POSITION, MazeDynamics
 
@@ -132,10 +132,6 @@ class MazeVectorEnv(VectorEnv):
         self._steps = np.zeros(num_envs, dtype=np.int64)
         self._needs_reset = np.zeros(num_envs, dtype=bool)
         self._backgrounds = np.zeros((num_envs, h, w, 3), dtype=np.uint8)
-        # Byte offsets of each cell's dot inside one frame, and the dot's bytes.
-        dots = self.renderer.dot_pixels
-        self._dot_bytes = (dots[:, :, None] * 3 + np.arange(3)).reshape(len(dots), -1)
-        self._dot_colour = np.tile(AGENT, dots.shape[1])
         self._frame_bytes = h * w * 3
         self._walls = np.zeros((num_envs, 4 * n * n), dtype=np.float32)
         self._arange = np.arange(num_envs)
@@ -219,9 +215,9 @@ class MazeVectorEnv(VectorEnv):
     def _frames(self) -> np.ndarray:
         """Fresh frames of every maze: the backgrounds plus each agent's dot."""
         frames = self._backgrounds.copy()
-        offsets = self._dot_bytes[self._cell] + (self._arange * self._frame_bytes)[:, None]
+        offsets = self.renderer.dot_bytes[self._cell] + (self._arange * self._frame_bytes)[:, None]
         frames.reshape(-1)[offsets.ravel()] = np.broadcast_to(
-            self._dot_colour, offsets.shape
+            self.renderer.dot_colour, offsets.shape
         ).ravel()
         return frames
 
