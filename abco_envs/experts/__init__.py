@@ -5,6 +5,7 @@ from abco_envs.experts.classic import CONTROLLERS, controller_for
 from abco_envs.experts.maze import MazeExpert
 from abco_envs.experts.random_policy import RandomPolicy
 from abco_envs.experts.rollout import EpisodeRecord, Policy, record_episode
+from abco_envs.ids import MAZE_IDS, env_name
 
 
 def expert_policy(env_id: str, seed: int | None = None) -> Policy:
@@ -14,11 +15,9 @@ def expert_policy(env_id: str, seed: int | None = None) -> Policy:
     deterministic controller (``seed`` unused).
 
     Raises:
-        ValueError: ``env_id`` has no expert.
+        UnknownEnvError: ``env_id`` has no expert (a ``ValueError``).
     """
-    from abco_envs import MAZE_IDS
-
-    if env_id.split(":")[-1] in MAZE_IDS:
+    if env_name(env_id) in MAZE_IDS:
         return MazeExpert(seed=seed)
     controller = controller_for(env_id)
     return lambda obs, info: controller(obs)

@@ -27,6 +27,9 @@ from collections.abc import Callable
 import gymnasium as gym
 import numpy as np
 
+from abco_envs.errors import UnknownEnvError
+from abco_envs.ids import env_name
+
 __all__ = [
     "CONTROLLERS",
     "acrobot_action",
@@ -139,15 +142,15 @@ def controller_for(env_id: str) -> Callable[[np.ndarray], int]:
         A deterministic function mapping an observation to a discrete action.
 
     Raises:
-        ValueError: If no controller exists for ``env_id``.
+        UnknownEnvError: If no controller exists for ``env_id`` (a ``ValueError``).
     """
-    try:
-        return CONTROLLERS[env_id]
-    except KeyError:
+    controller = CONTROLLERS.get(env_name(env_id))
+    if controller is None:
         known = ", ".join(sorted(CONTROLLERS))
-        raise ValueError(
+        raise UnknownEnvError(
             f"No classic-control expert for env id {env_id!r}; known ids: {known}"
-        ) from None
+        )
+    return controller
 
 
 def rollout_returns(env_id: str, episodes: int = 100, seed: int = 0) -> np.ndarray:

@@ -14,9 +14,17 @@ from abco_envs.maze.observation import (
     state_features,
     state_observation_space,
 )
-from abco_envs.maze.options import LAYOUT_SOURCES, check_env_options, resolve_image_size
+from abco_envs.maze.options import (
+    LAYOUT_SOURCES,
+    check_action,
+    check_env_options,
+    check_render_mode,
+    check_reset_options,
+    check_start,
+    resolve_image_size,
+)
 from abco_envs.maze.render import MazeRenderer
-from abco_envs.maze.reset import LayoutSource, start_position
+from abco_envs.maze.reset import LayoutSource
 from abco_envs.maze.rules import Action, MazeDynamics
 
 # The helpers and constants below MazeEnv stay importable from here, where they used to live.
@@ -38,6 +46,8 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
     ## Action Space
     ``Discrete(4)``: 0 = N (up), 1 = S (down), 2 = E (right), 3 = W (left), as
     :class:`~abco_envs.maze.rules.Action`. A move into a wall leaves the agent in place.
+    Actions are Python or numpy integers; floats, strings, ``None`` and ``bool`` are refused
+    with :class:`~abco_envs.errors.InvalidActionError`, as are integers outside ``0..3``.
 
     ## Observation Space
     ``obs_type="image"`` (default): ``Box(0, 255, (H, W, 3), uint8)``, the rendered maze:
@@ -59,7 +69,10 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
 
     ## Reset Options
     ``layout``: an explicit ``(n, n)`` layout in gym-maze's encoding (validated);
-    ``layout_index``: index into the env's split; ``start``: ``(row, col)`` start cell.
+    ``layout_index``: integer index into the env's split (not for ``split="procedural"``);
+    ``start``: ``(row, col)`` start cell, integers, inside the maze and not the goal. Other
+    keys, non-dict options and bad values raise :class:`~abco_envs.errors.InvalidOptionError`
+    (:class:`~abco_envs.errors.OptionOutOfRangeError` for an index or cell out of range).
 
     ## Info
     ``position`` (int64 array ``[row, col]``), ``layout_id`` (structural hash) and, after reset,
@@ -90,14 +103,10 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
         split: str = "train",
     ) -> None:
         check_env_options(size, obs_type, split)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"unknown render_mode {render_mode!r}; expected one of"
-                f" {self.metadata['render_modes']}"
-            )
-        self.size, self.obs_type, self.split = size, obs_type, split
+        check_render_mode(render_mode, self.metadata["render_modes"])
+        self.size, self.obs_type, self.split = int(size), obs_type, split
         self.render_mode = render_mode
-        self.image_size = resolve_image_size(image_size)
+        self.image_size = resolve_image_size(image_size, self.size)
         self.renderer = MazeRenderer(size, *self.image_size)
         self.action_space = spaces.Discrete(4)
         if obs_type == "image":
@@ -117,16 +126,19 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start an episode; ``seed`` fixes the layout drawn and everything after it."""
         super().reset(seed=seed)
-        options = options or {}
+        options = check_reset_options(options)
+        row, col = check_start(options.get("start"), self.size)
         drawn = self._layouts.draw(
             self.np_random, options.get("layout"), options.get("layout_index")
         )
-        row, col = start_position(options.get("start"), self.size)
         self.cells, self.layout_index, self.layout_id = drawn.cells, drawn.index, drawn.layout_id
         # One maze's move table, as the batched kernel wants it: (1, n * n, 4).
         self._moves = drawn.moves[None]
         self._background = self.renderer.background(drawn.cells)
-        self._walls = state_features(drawn.cells)
+        # The state vector's walls part, behind zero one-hots: a step copies it and sets two.
+        self._state_background = np.concatenate(
+            [np.zeros(2 * self.size, dtype=np.float32), state_features(drawn.cells)]
+        )
         self.row, self.col = row, col
         self._cell = row * self.size + col
         info = {"position": np.array([row, col]), "layout_id": self.layout_id,
@@ -139,9 +151,7 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
         """Move one cell N, S, E or W (or stay, against a wall)."""
         if self.cells is None:
             raise gym.error.ResetNeeded("call reset() before step()")
-        a = int(action)
-        if not 0 <= a < 4:
-            raise ValueError(f"invalid action {action!r}: expected 0 (N), 1 (S), 2 (E) or 3 (W)")
+        a = check_action(action)
         cell, reward, terminated = self._dynamics.step(self._moves, 0, self._cell, a)
         self._cell = int(cell)
         self.row, self.col = divmod(self._cell, self.size)
@@ -153,11 +163,9 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
     def _observe(self) -> np.ndarray:
         if self.obs_type == "image":
             return self.renderer.draw_agent(self._background.copy(), self.row, self.col)
-        n = self.size
-        obs = np.zeros(2 * n + 4 * n * n, dtype=np.float32)
+        obs = self._state_background.copy()
         obs[self.row] = 1.0
-        obs[n + self.col] = 1.0
-        obs[2 * n :] = self._walls
+        obs[self.size + self.col] = 1.0
         return obs
 
     # -- rendering ----------------------------------------------------------------------------

@@ -22,6 +22,7 @@ from collections import deque
 
 import numpy as np
 
+from abco_envs.errors import InvalidLayoutError
 from abco_envs.maze.rules import (
     DELTAS,
     OPEN_BITS,
@@ -50,10 +51,6 @@ __all__ = [
 
 #: The action that undoes each action (N<->S, E<->W).
 _OPPOSITE = np.array([Action.S, Action.N, Action.W, Action.E])
-
-
-class InvalidLayoutError(ValueError):
-    """A layout array that is not a consistent, connected maze in gym-maze's encoding."""
 
 
 def _open(cells: np.ndarray, r: int, c: int, a: int) -> None:

@@ -45,6 +45,11 @@ class MazeRenderer:
         cell = min(height, width) / n
         self.wall = max(1, int(round(cell / 12)))
         self.dot_pixels = self._dot_pixels(cell)
+        #: Byte offsets of each cell's dot in a C-contiguous frame, and the bytes to write
+        #: there: one flat fancy-index assignment draws the agent (a few times faster than
+        #: assigning a colour to pixel rows).
+        self.dot_bytes = (self.dot_pixels[:, :, None] * 3 + np.arange(3)).reshape(n * n, -1)
+        self.dot_colour = np.tile(AGENT, self.dot_pixels.shape[1])
 
     def _dot_pixels(self, cell: float) -> np.ndarray:
         """Flat pixel indices of the agent's dot in every cell, padded to one length."""
@@ -90,7 +95,10 @@ class MazeRenderer:
 
     def draw_agent(self, img: np.ndarray, row: int, col: int) -> np.ndarray:
         """Draw the agent's dot into ``img`` (in place) and return it."""
-        img.reshape(-1, 3)[self.dot_pixels[row * self.n + col]] = AGENT
+        if img.flags.c_contiguous:
+            img.reshape(-1)[self.dot_bytes[row * self.n + col]] = self.dot_colour
+        else:  # reshape(-1) would copy: write through a pixel view instead
+            img[np.unravel_index(self.dot_pixels[row * self.n + col], img.shape[:2])] = AGENT
         return img
 
     def frame(self, cells: np.ndarray, row: int, col: int) -> np.ndarray:

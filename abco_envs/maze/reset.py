@@ -1,4 +1,4 @@
-"""What a maze reset draws: its layout (from options, the pool or the generator) and its start.
+"""What a maze reset draws: its layout, from the ``layout`` option, the pool or the generator.
 
 Shared by :class:`~abco_envs.maze.env.MazeEnv` and
 :class:`~abco_envs.maze.vector.MazeVectorEnv`, which is how the vector env's maze ``i`` draws
@@ -19,11 +19,13 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from abco_envs.errors import InvalidOptionError
 from abco_envs.maze.layout import generate_layout, layout_hash, validate_layout
+from abco_envs.maze.options import check_layout_index
 from abco_envs.maze.pool import LOOP_FRACTION, layout_pool
-from abco_envs.maze.rules import START_POSITION, move_table
+from abco_envs.maze.rules import move_table
 
-__all__ = ["DrawnLayout", "LayoutSource", "start_position"]
+__all__ = ["DrawnLayout", "LayoutSource"]
 
 
 class DrawnLayout(NamedTuple):
@@ -81,36 +83,22 @@ class LayoutSource:
 
         Raises:
             InvalidLayoutError: ``layout`` is not a valid layout of this size.
-            IndexError: ``index`` is outside the split.
+            InvalidOptionError: ``index`` is not an integer, or is given to a procedural env.
+            OptionOutOfRangeError: ``index`` is outside the split (an ``IndexError``).
         """
         if layout is not None:
             cells = validate_layout(layout, self.size)
             return DrawnLayout(cells, -1, layout_hash(cells), move_table(cells))
-        if self.layouts is None:
+        if self.layouts is None or self.ids is None:
+            if index is not None:
+                raise InvalidOptionError(
+                    f"reset option 'layout_index' {index!r} needs a pool split, but this env's"
+                    " split is 'procedural' (its layouts are generated, not indexed)"
+                )
             cells = generate_layout(self.size, rng, LOOP_FRACTION)
             return DrawnLayout(cells, -1, layout_hash(cells), move_table(cells))
         if index is None:
             index = int(rng.integers(len(self.layouts)))
         else:
-            index = int(index)
-            if not 0 <= index < len(self.layouts):
-                raise IndexError(
-                    f"layout_index {index} out of range for the {self.split!r} split"
-                    f" of {len(self.layouts)} layouts"
-                )
-        assert self.ids is not None
+            index = check_layout_index(index, len(self.layouts), self.split)
         return DrawnLayout(self.layouts[index], index, self.ids[index], self._moves[index])
-
-
-def start_position(start: Any, size: int) -> tuple[int, int]:
-    """The ``start`` reset option as a ``(row, col)`` cell; ``None`` gives the usual start.
-
-    Raises:
-        ValueError: ``start`` lies outside the ``size`` x ``size`` maze.
-    """
-    if start is None:
-        return START_POSITION
-    row, col = int(start[0]), int(start[1])
-    if not (0 <= row < size and 0 <= col < size):
-        raise ValueError(f"start {start} is outside the {size}x{size} maze")
-    return row, col

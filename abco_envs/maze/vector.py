@@ -20,28 +20,45 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from abco_envs.errors import InvalidOptionError
 from abco_envs.maze.observation import (
     image_observation_space,
     state_features,
     state_observation_space,
 )
-from abco_envs.maze.options import check_env_options, resolve_image_size
-from abco_envs.maze.render import AGENT, MazeRenderer
-from abco_envs.maze.reset import LayoutSource, start_position
-from abco_envs.maze.rules import MAX_EPISODE_STEPS, MazeDynamics
+from abco_envs.maze.options import (
+    check_actions,
+    check_env_options,
+    check_render_mode,
+    check_reset_options,
+    check_start,
+    is_integer,
+    resolve_image_size,
+)
+from abco_envs.maze.render import MazeRenderer
+from abco_envs.maze.reset import DrawnLayout, LayoutSource
+from abco_envs.maze.rules import MAX_EPISODE_STEPS, START_POSITION, MazeDynamics
 
 __all__ = ["MazeVectorEnv"]
 
 
 def _per_env(value: Any, num_envs: int, single_ndim: int, name: str) -> list[Any]:
-    """A reset option given once for all mazes, or once per maze (one more leading axis)."""
-    if value is None or np.ndim(value) == single_ndim:
+    """A reset option given once for all mazes, or once per maze (one more leading axis).
+
+    A value with fewer axes than one maze's counts as given once: the option's own check
+    then says what is wrong with it.
+    """
+    try:
+        ndim = None if value is None else np.ndim(value)
+    except ValueError:  # a ragged nest of sequences
+        ndim = -1
+    if ndim is None or 0 <= ndim <= single_ndim:
         return [value] * num_envs
-    if np.ndim(value) == single_ndim + 1 and len(value) == num_envs:
+    if ndim == single_ndim + 1 and len(value) == num_envs:
         return list(value)
-    raise ValueError(
+    raise InvalidOptionError(
         f"reset option {name!r} must be given once or once per maze ({num_envs} values),"
-        f" got an array of shape {np.shape(value)}"
+        f" got {value!r}"
     )
 
 
@@ -77,12 +94,20 @@ class MazeVectorEnv(VectorEnv):
         render_mode: str | None = None,
     ) -> None:
         check_env_options(size, obs_type, split)
-        if num_envs < 1:
-            raise ValueError(f"num_envs must be at least 1, got {num_envs}")
+        check_render_mode(render_mode, self.metadata["render_modes"])
+        if not is_integer(num_envs) or num_envs < 1:
+            raise InvalidOptionError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
+        if max_episode_steps is not None and (not is_integer(max_episode_steps)
+                                              or max_episode_steps < 1):
+            raise InvalidOptionError(
+                f"max_episode_steps must be None or an integer of at least 1,"
+                f" got {max_episode_steps!r}"
+            )
+        num_envs, size = int(num_envs), int(size)
         self.num_envs, self.size, self.obs_type, self.split = num_envs, size, obs_type, split
         self.render_mode = render_mode
         self.max_episode_steps = max_episode_steps if max_episode_steps is not None else np.inf
-        self.renderer = MazeRenderer(size, *resolve_image_size(image_size))
+        self.renderer = MazeRenderer(size, *resolve_image_size(image_size, size))
         self.single_action_space = spaces.Discrete(4)
         self.action_space = batch_space(self.single_action_space, num_envs)
         if obs_type == "image":
@@ -107,10 +132,6 @@ class MazeVectorEnv(VectorEnv):
         self._steps = np.zeros(num_envs, dtype=np.int64)
         self._needs_reset = np.zeros(num_envs, dtype=bool)
         self._backgrounds = np.zeros((num_envs, h, w, 3), dtype=np.uint8)
-        # Byte offsets of each cell's dot inside one frame, and the dot's bytes.
-        dots = self.renderer.dot_pixels
-        self._dot_bytes = (dots[:, :, None] * 3 + np.arange(3)).reshape(len(dots), -1)
-        self._dot_colour = np.tile(AGENT, dots.shape[1])
         self._frame_bytes = h * w * 3
         self._walls = np.zeros((num_envs, 4 * n * n), dtype=np.float32)
         self._arange = np.arange(num_envs)
@@ -124,10 +145,13 @@ class MazeVectorEnv(VectorEnv):
             self._pool_backgrounds[index] = self.renderer.background(cells)
         return self._pool_backgrounds[index]
 
-    def _reset_one(self, i: int, layout: Any = None, index: Any = None, start: Any = None) -> None:
+    def _reset_one(
+        self, i: int, drawn: DrawnLayout | None = None, start: tuple[int, int] = START_POSITION
+    ) -> None:
         """Reset maze ``i`` exactly as ``MazeEnv.reset`` would (same draws from its rng)."""
-        drawn = self._layouts.draw(self._rngs[i], layout, index)
-        row, col = start_position(start, self.size)
+        if drawn is None:
+            drawn = self._layouts.draw(self._rngs[i])
+        row, col = start
         self.cells[i] = drawn.cells
         self._moves[i] = drawn.moves
         self.layout_indices[i], self.layout_ids[i] = drawn.index, drawn.layout_id
@@ -147,12 +171,17 @@ class MazeVectorEnv(VectorEnv):
             if len(seeds) != self.num_envs:
                 raise ValueError(f"expected {self.num_envs} seeds, got {len(seeds)}")
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        options = options or {}
+        options = check_reset_options(options)
         layouts = _per_env(options.get("layout"), self.num_envs, 2, "layout")
         indices = _per_env(options.get("layout_index"), self.num_envs, 0, "layout_index")
-        starts = _per_env(options.get("start"), self.num_envs, 1, "start")
+        # Every option is checked (and every layout drawn) before any maze resets, so a bad
+        # value for one maze leaves all of them as they were.
+        starts = [check_start(s, self.size)
+                  for s in _per_env(options.get("start"), self.num_envs, 1, "start")]
+        drawn = [self._layouts.draw(rng, layout, index)
+                 for rng, layout, index in zip(self._rngs, layouts, indices)]
         for i in range(self.num_envs):
-            self._reset_one(i, layouts[i], indices[i], starts[i])
+            self._reset_one(i, drawn[i], starts[i])
         self._needs_reset[:] = False
         return self._observe(), self._infos(reset=np.ones(self.num_envs, dtype=bool))
 
@@ -162,11 +191,7 @@ class MazeVectorEnv(VectorEnv):
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every maze; a maze that ended on the last step is reset instead (next-step)."""
-        actions = np.asarray(actions).astype(np.int64, copy=False).reshape(-1)
-        if actions.shape != (self.num_envs,):
-            raise ValueError(f"expected {self.num_envs} actions, got shape {actions.shape}")
-        if actions.min() < 0 or actions.max() > 3:
-            raise ValueError("invalid action: expected 0 (N), 1 (S), 2 (E) or 3 (W) per maze")
+        actions = check_actions(actions, self.num_envs)
         resetting = self._needs_reset.copy()
         for i in np.flatnonzero(resetting):
             self._reset_one(int(i))
@@ -190,9 +215,9 @@ class MazeVectorEnv(VectorEnv):
     def _frames(self) -> np.ndarray:
         """Fresh frames of every maze: the backgrounds plus each agent's dot."""
         frames = self._backgrounds.copy()
-        offsets = self._dot_bytes[self._cell] + (self._arange * self._frame_bytes)[:, None]
+        offsets = self.renderer.dot_bytes[self._cell] + (self._arange * self._frame_bytes)[:, None]
         frames.reshape(-1)[offsets.ravel()] = np.broadcast_to(
-            self._dot_colour, offsets.shape
+            self.renderer.dot_colour, offsets.shape
         ).ravel()
         return frames
 
