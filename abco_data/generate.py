@@ -88,9 +88,10 @@ def _episodes(s: DatasetSpec, env: Any) -> Iterator[tuple[int, int, dict[str, An
             for j in range(p["episodes_per_layout"]):
                 ep_seed = seed + k * p["episodes_per_layout"] + j
                 cell = int(np.random.default_rng([ep_seed, 1]).integers(n * n - 1))  # no goal
+                start = (0, 0) if p.get("from_start_cell") else divmod(cell, n)
                 ep = record_episode(env, RandomPolicy(env.action_space, seed=ep_seed),
                                     seed=ep_seed, max_steps=p["max_steps"],
-                                    options={"layout_index": k, "start": divmod(cell, n)})
+                                    options={"layout_index": k, "start": start})
                 cols = _drop_wall_hits(ep) if p["drop_wall_hits"] else vars(ep)
                 if cols is not None:
                     yield ep_seed, k, cols

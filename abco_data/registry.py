@@ -50,6 +50,11 @@ _MAZE_PRE = {
     "image_size": 64,
     "reference_episodes": 100,
 }
+#: The authors' pre-demonstrations (their ``--no_hit`` agent): random walks from the start cell,
+#: as an agent that resets the env would, with moves into walls dropped. A parameter of these
+#: datasets only, so the older datasets' stored parameters (and bytes) stay as they were.
+_MAZE_PRE_START = {**_MAZE_PRE, "episodes_per_layout": 40, "drop_wall_hits": True,
+                   "from_start_cell": True}
 _CLASSIC_EXPERT = {"episodes": 50, "reference_episodes": 100, "reference_expert_episodes": 20}
 _CLASSIC_PRE = {"transitions": 50_000, "reference_episodes": 100,
                 "reference_expert_episodes": 20}
@@ -138,11 +143,16 @@ def _build() -> dict[str, DatasetSpec]:
             params = {**base, "seed": (2 * i + j + 1) * 1_000_000}
             ds_id = dataset_id(env_id, kind)
             specs[ds_id] = DatasetSpec(ds_id, env_id, kind, MappingProxyType(params))
+    for k, (env_id, name) in enumerate((e, n) for e, n in ENV_NAMES.items() if is_maze(e)):
+        params = {**_MAZE_PRE_START, "seed": (2 * len(ENV_NAMES) + k + 1) * 1_000_000}
+        ds_id = f"abco/{name}-pre-start-v{VERSION}"
+        specs[ds_id] = DatasetSpec(ds_id, env_id, "pre_demonstrations", MappingProxyType(params))
     return specs
 
 
 _SPECS = _build()
-#: The twelve dataset ids, mazes first, expert before pre-demonstrations.
+#: The dataset ids: the twelve of Table 1 (mazes first, expert before pre-demonstrations),
+#: then the mazes' start-cell pre-demonstrations of the authors' regime.
 DATASET_IDS: tuple[str, ...] = tuple(_SPECS)
 
 

@@ -25,9 +25,26 @@ Choices where the paper is loose:
   it measures the current policy.
 * Both networks are improved, not re-initialised, across iterations ("Improve M_theta").
 
+The IDM's health is measured, not assumed: a fixed held-out part of ``I_pre`` (true actions,
+:func:`validation_split`) gives its accuracy, overall and per class, after every epoch. Each
+time it trains it runs at most ``idm_epochs`` epochs, stops after ``idm_patience`` epochs
+without a better validation accuracy, and keeps its best weights. **Dead-IDM rule**: an IDM
+whose validation accuracy is below ``chance + DEAD_MARGIN`` after training (chance = the
+largest class share of the held-out actions; judged on at least ``MIN_JUDGED`` held-out
+transitions) predicts one class for everything, and every
+expert pair gets one label; it is re-initialised and trained again once, and if it is still
+at chance the run stops with :class:`~abco_train.methods.TrainingFailed` (status
+``idm_at_chance``) instead of ending with a normal-looking result.
+
+Budgets are equal across variants: a variant that runs one iteration (``bc``, ``bco``) trains
+its policy for as many epochs as the iterative ones do over all their iterations,
+``policy_epochs * (first_epochs_factor + iterations)``, so no baseline is behind on epochs.
+
 Variants (switches of one implementation, see :data:`VARIANTS`): ``bc`` (policy on the true
 expert actions), ``bco`` (BCO(0): IDM on ``I_pre`` once), ``bco-alpha`` (IDM re-trained on all
-post-demonstrations), ``abco`` (attention + partial sampling), and the ablations of Table 2:
+post-demonstrations, the ABCO paper's reading of BCO(alpha)), ``bco-alpha-torabi`` (Torabi et
+al.'s BCO(alpha): ``I_pre`` plus every post-demonstration so far), ``abco`` (attention +
+partial sampling), and the ablations of Table 2:
 ``attention`` (attention, BCO(alpha) data), ``sampling-partial`` and ``sampling-whole`` (no
 attention), ``abco-whole`` (attention + whole sampling).
 """
@@ -44,19 +61,29 @@ import torch.nn.functional as F
 from abco_train.config import RunConfig
 from abco_train.data import TrainingData
 from abco_train.evaluate import Rollouts
-from abco_train.methods import Method, register
+from abco_train.methods import Method, TrainingFailed, register
 from abco_train.nets import build_networks
 from abco_train.sampling import sample_training_set
 
-__all__ = ["VARIANTS", "ABCO"]
+__all__ = ["VARIANTS", "ABCO", "DEAD_MARGIN", "validation_split"]
+
+#: An IDM whose held-out accuracy is below ``chance + DEAD_MARGIN`` is at chance (dead).
+DEAD_MARGIN = 0.05
+#: Below this many held-out transitions the accuracy is logged but not judged: on a few dozen
+#: transitions (tiny test datasets) chance and a working IDM cannot be told apart.
+MIN_JUDGED = 200
+#: Held out of ``I_pre`` by default: 10% of it, at most this many transitions.
+VALIDATION_CAP = 2_000
 
 #: Method switches: (train the IDM, attention, how I_s is built after iteration 0).
 #: ``idm_data``: "pre" = I_pre only (BCO(0)), "pos" = all post-demonstrations (BCO(alpha)),
+#: "pre+pos" = I_pre and all post-demonstrations (Torabi et al.'s BCO(alpha)),
 #: "partial" / "whole" = ABCO's sampling from winning / all runs; ``None`` = no IDM (BC).
 VARIANTS: dict[str, dict[str, Any]] = {
     "bc": {"attention": False, "idm_data": None, "iterative": False},
     "bco": {"attention": False, "idm_data": "pre", "iterative": False},
     "bco-alpha": {"attention": False, "idm_data": "pos", "iterative": True},
+    "bco-alpha-torabi": {"attention": False, "idm_data": "pre+pos", "iterative": True},
     "abco": {"attention": True, "idm_data": "partial", "iterative": True},
     "attention": {"attention": True, "idm_data": "pos", "iterative": True},
     "sampling-partial": {"attention": False, "idm_data": "partial", "iterative": True},
@@ -113,8 +140,24 @@ def _predict(net: torch.nn.Module, inputs: Any, n: int, batch_size: int = 512,
     return torch.cat(out) if out else torch.zeros(0, dtype=torch.long)
 
 
-@register("bc", "bco", "bco-alpha", "abco", "attention", "sampling-partial", "sampling-whole",
-          "abco-whole")  # fmt: skip
+def validation_split(n: int, size: int | None, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(train, held-out)`` indices of ``n`` pre-demonstration transitions.
+
+    The held-out part has ``size`` transitions (default 10%, at most :data:`VALIDATION_CAP`),
+    drawn by a generator of its own, so the split is fixed by the seed and moves none of the
+    run's other draws.
+
+    Example:
+        >>> train, held = validation_split(100, None, seed=0)
+        >>> len(train), len(held), len(set(train) & set(held))
+        (90, 10, 0)
+    """
+    size = min(n - 1, size if size is not None else min(VALIDATION_CAP, max(1, n // 10)))
+    order = np.random.default_rng([seed, 0x1D]).permutation(n)
+    return np.sort(order[size:]), np.sort(order[:size])
+
+
+@register(*VARIANTS)
 class ABCO(Method):
     """ABCO(alpha) with the switches of :data:`VARIANTS` (see the module docstring)."""
 
@@ -134,8 +177,10 @@ class ABCO(Method):
             deltas = states[data.pre_t + 1] - states[data.pre_t]
             stats = {"obs_mean": states.mean(0), "obs_std": states.std(0),
                      "delta_mean": deltas.mean(0), "delta_std": deltas.std(0)}  # fmt: skip
+        self.net_stats = stats
         self.policy, self.idm = build_networks(
-            data.observation_space, data.n_actions, config.arch, bool(config.attention), **stats
+            data.observation_space, data.n_actions, config.arch, bool(config.attention),
+            config.idm_input, **stats,
         )
         # Networks live on the run's device; the data stays in CPU memory and travels to the
         # device one batch at a time (a maze's frames need not fit in GPU memory).
@@ -145,8 +190,15 @@ class ABCO(Method):
         self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=config.lr)
         # -- data as torch tensors (no copies) ------------------------------------------------
         self.pre_obs = torch.from_numpy(data.pre_obs)
-        self.pre_t = torch.from_numpy(data.pre_t)
-        self.pre_actions = torch.from_numpy(data.pre_actions)
+        keep, held = validation_split(len(data.pre_t), config.idm_validation, config.seed)
+        if self.idm_data is None:  # BC has no IDM to measure
+            keep, held = np.arange(len(data.pre_t)), np.zeros(0, dtype=np.int64)
+        self.pre_t = torch.from_numpy(data.pre_t[keep])
+        self.pre_actions = torch.from_numpy(data.pre_actions[keep])
+        self.val_t = torch.from_numpy(data.pre_t[held])
+        self.val_actions = torch.from_numpy(data.pre_actions[held])
+        shares = np.bincount(data.pre_actions[held], minlength=data.n_actions) / max(len(held), 1)
+        self.chance = float(shares.max())
         self.expert_obs = torch.from_numpy(data.expert_obs)
         self.expert_t = torch.from_numpy(data.expert_t)
         # -- I_pos (accumulated post-demonstrations) and the current I_s ----------------------
@@ -155,8 +207,8 @@ class ABCO(Method):
         self.pos_actions = torch.zeros(0, dtype=torch.long)
         self.pos_runs = np.zeros(0, dtype=np.int64)
         self.pos_wins = np.zeros(0, dtype=bool)
-        size = min(len(data.pre_t), config.idm_samples or len(data.pre_t))
-        self.s_pre = torch.from_numpy(rng.choice(len(data.pre_t), size, replace=False))
+        size = min(len(self.pre_t), config.idm_samples or len(self.pre_t))
+        self.s_pre = torch.from_numpy(rng.choice(len(self.pre_t), size, replace=False))
         self.s_pos = torch.zeros(0, dtype=torch.long)
         self.labels: np.ndarray | None = None
 
@@ -171,22 +223,25 @@ class ABCO(Method):
         """Improve the IDM on ``I_s``, label the expert pairs, clone them into the policy."""
         cfg, stats = self.config, {}
         boost = cfg.first_epochs_factor if iteration == 0 else 1
+        # One-iteration variants get the iterative ones' whole policy budget (equal epochs).
+        policy_epochs = cfg.policy_epochs * (
+            boost if self.iterative else cfg.first_epochs_factor + cfg.iterations)
         expert_n = len(self.expert_t)
         true = torch.from_numpy(self.data.expert_eval_actions)
         if self.idm_data is None:  # BC: the supervised reference, true expert actions
             labels = true
         else:
             if iteration == 0 or self.idm_data != "pre":
-                stats["idm_loss"] = self._train_idm(cfg.idm_epochs * boost)
+                stats.update(self._train_idm_checked(cfg.idm_epochs * boost, iteration))
                 stats["idm_samples"] = int(len(self.s_pre) + len(self.s_pos))
             labels = _predict(self.idm, self._expert_pairs, expert_n, device=self.device)
             stats["idm_expert_accuracy"] = float((labels == true).float().mean())
         self.labels = labels.numpy()
         stats["policy_loss"] = _fit(
             self.policy, self.policy_opt, lambda idx: (self.expert_obs[self.expert_t[idx]],),
-            labels, cfg.policy_epochs * boost, cfg.batch_size, self.rng, "policy", cfg.quiet,
-            self.device,
+            labels, policy_epochs, cfg.batch_size, self.rng, "policy", cfg.quiet, self.device,
         )  # fmt: skip
+        stats["policy_epochs"] = policy_epochs
         predicted = _predict(self.policy, lambda idx: (self.expert_obs[self.expert_t[idx]],),
                              expert_n, device=self.device)  # fmt: skip
         stats["policy_label_accuracy"] = float((predicted == labels).float().mean())
@@ -196,8 +251,74 @@ class ABCO(Method):
         rows = self.expert_t[idx]
         return self.expert_obs[rows], self.expert_obs[rows + 1]
 
-    def _train_idm(self, epochs: int) -> float:
-        """Cross-entropy epochs of the IDM over ``I_s = I_pre[s_pre] + I_pos[s_pos]``."""
+    # -- the IDM: early stopping on held-out pre-demonstrations, and the dead-IDM rule ------
+
+    @torch.no_grad()
+    def validate_idm(self) -> dict[str, Any]:
+        """Accuracy of the IDM on the held-out pre-demonstrations, overall and per class."""
+        if len(self.val_t) == 0:
+            return {"accuracy": float("nan"), "class_accuracy": []}
+        pred = _predict(self.idm, lambda idx: (self.pre_obs[self.val_t[idx]],
+                                               self.pre_obs[self.val_t[idx] + 1]),
+                        len(self.val_t), device=self.device)  # fmt: skip
+        hits = (pred == self.val_actions).numpy()
+        truth = self.val_actions.numpy()
+        per_class = [float(hits[truth == c].mean()) if (truth == c).any() else float("nan")
+                     for c in range(self.data.n_actions)]  # fmt: skip
+        return {"accuracy": float(hits.mean()), "class_accuracy": per_class}
+
+    def _train_idm_checked(self, max_epochs: int, iteration: int) -> dict[str, Any]:
+        """Train the IDM with early stopping; apply the dead-IDM rule (module docstring)."""
+        loss, epochs = self._train_idm(max_epochs)
+        health, reinitialised = self.validate_idm(), 0
+        if self._at_chance(health):
+            self._new_idm()  # fresh weights from the run's torch generator, then once more
+            loss, epochs = self._train_idm(max_epochs)
+            health, reinitialised = self.validate_idm(), 1
+        stats = {"idm_loss": loss, "idm_epochs": epochs, "idm_val_accuracy": health["accuracy"],
+                 "idm_val_class_accuracy": health["class_accuracy"], "idm_chance": self.chance,
+                 "idm_reinitialised": reinitialised}  # fmt: skip
+        if self._at_chance(health):
+            raise TrainingFailed(
+                "idm_at_chance",
+                f"the IDM is at chance after re-initialisation (iteration {iteration}: held-out "
+                f"accuracy {health['accuracy']:.3f}, chance {self.chance:.3f}); its labels would"
+                " be one action for every expert pair, so the run stops without a result",
+                stats,
+            )
+        return stats
+
+    def _at_chance(self, health: dict[str, Any]) -> bool:
+        return len(self.val_t) >= MIN_JUDGED and health["accuracy"] < self.chance + DEAD_MARGIN
+
+    def _new_idm(self) -> None:
+        _, idm = build_networks(self.data.observation_space, self.data.n_actions,
+                                self.config.arch, bool(self.config.attention),
+                                self.config.idm_input, **self.net_stats)  # fmt: skip
+        self.idm = idm.to(self.device)
+        self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=self.config.lr)
+
+    def _train_idm(self, max_epochs: int) -> tuple[float, int]:
+        """Epochs of the IDM over ``I_s = I_pre[s_pre] + I_pos[s_pos]`` until the held-out
+        accuracy stops improving (``idm_patience``) or ``max_epochs``; the best weights are
+        kept. Returns the last epoch's mean loss and the epochs run."""
+        best, best_state, stale, loss, epochs = -1.0, None, 0, float("nan"), 0
+        for epoch in range(1, max_epochs + 1):
+            epochs, loss = epoch, self._idm_epoch()
+            accuracy = self.validate_idm()["accuracy"]
+            if np.isnan(accuracy) or accuracy > best:
+                best, stale = accuracy, 0
+                best_state = {k: v.detach().clone() for k, v in self.idm.state_dict().items()}
+            else:
+                stale += 1
+            if stale >= self.config.idm_patience:
+                break
+        if best_state is not None:
+            self.idm.load_state_dict(best_state)
+        return loss, epochs
+
+    def _idm_epoch(self) -> float:
+        """One cross-entropy epoch of the IDM over ``I_s = I_pre[s_pre] + I_pos[s_pos]``."""
         n_pre = len(self.s_pre)
         labels = torch.cat([self.pre_actions[self.s_pre], self.pos_actions[self.s_pos]])
 
@@ -211,7 +332,7 @@ class ABCO(Method):
             s[~is_pre], s1[~is_pre] = self.pos_obs[rows], self.pos_obs[rows + 1]
             return s, s1
 
-        return _fit(self.idm, self.idm_opt, pairs, labels, epochs, self.config.batch_size,
+        return _fit(self.idm, self.idm_opt, pairs, labels, 1, self.config.batch_size,
                     self.rng, "IDM", self.config.quiet, self.device)  # fmt: skip
 
     # -- post-demonstrations and the next I_s --------------------------------------------------
@@ -220,7 +341,7 @@ class ABCO(Method):
         """Append the runs to ``I_pos`` and re-sample ``I_s`` for the next iteration."""
         if not self.iterative or self.idm_data is None or rollouts.observations is None:
             return {}
-        keep_all = self.idm_data in ("pos", "whole")
+        keep_all = self.idm_data in ("pos", "pre+pos", "whole")
         runs = np.arange(len(rollouts.successes))
         keep = runs if keep_all else runs[rollouts.successes]
         offset = int(self.pos_wins.shape[0])
@@ -236,6 +357,10 @@ class ABCO(Method):
             self.pos_actions = torch.cat([self.pos_actions, new_actions])
             self.pos_runs = np.concatenate([self.pos_runs, offset + rollouts.run_ids[sel]])
         self.pos_wins = np.concatenate([self.pos_wins, rollouts.successes])
+        if self.idm_data == "pre+pos":  # Torabi et al.: I_pre and every post-demonstration
+            self.s_pos = torch.arange(len(self.pos_t))
+            return {"pos_transitions": len(self.pos_t), "is_from_pos": len(self.s_pos),
+                    "is_from_pre": len(self.s_pre)}  # fmt: skip
         if self.idm_data == "pos":  # BCO(alpha): every post-demonstration so far
             self.s_pre = torch.zeros(0, dtype=torch.long)
             self.s_pos = torch.arange(len(self.pos_t))

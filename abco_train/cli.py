@@ -55,9 +55,14 @@ def _train(args: argparse.Namespace) -> int:
     from abco_train.train import format_table, train
 
     final = train(config)
-    if final is not None:
-        print(format_table(final))
-        print(f"run folder: {config.run_dir}")
+    if final is None:
+        return 0
+    if final.get("status", "ok") != "ok":  # the method's health check stopped the run
+        print(f"error: {format_table(final)}", file=sys.stderr)
+        print(f"run folder: {config.run_dir}", file=sys.stderr)
+        return 1
+    print(format_table(final))
+    print(f"run folder: {config.run_dir}")
     return 0
 
 

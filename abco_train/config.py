@@ -39,7 +39,8 @@ import abco_envs
 
 __all__ = [
     "RunConfig", "ConfigError", "DEFAULTS", "ENV_DEFAULTS", "RUNTIME_FIELDS", "PRESETS",
-    "PROTOCOLS", "ARCHS", "ARCHS_BY_KIND", "DEVICES", "env_kind", "known_envs", "comparable",
+    "PROTOCOLS", "ARCHS", "ARCHS_BY_KIND", "DEVICES", "IDM_INPUTS", "REGIMES",
+    "REGIME_DEFAULTS", "env_kind", "known_envs", "comparable",
     "add_config_options", "config_from_args", "flag_of",
 ]  # fmt: skip
 
@@ -49,6 +50,10 @@ PROTOCOLS = ("paper", "standard")
 #: ``resnet18`` (the paper's image network); the ones that fit each env kind's observations.
 ARCHS = ("mlp", "cnn", "resnet18")
 DEVICES = ("auto", "cpu", "cuda")
+#: How the IDM reads a transition (:class:`abco_train.nets.IDMNet`).
+IDM_INPUTS = ("difference", "pair")
+#: ``default``: abco's data and schedule; ``authors``: the authors' (see REGIME_DEFAULTS).
+REGIMES = ("default", "authors")
 ARCHS_BY_KIND = {"maze": ("cnn", "resnet18"), "classic": ("mlp",)}
 
 
@@ -68,6 +73,12 @@ def env_kind(env_id: str) -> str:
     if name in abco_envs.CLASSIC_IDS:
         return "classic"
     raise ConfigError(f"unknown env id {env_id!r}; abco trains on: {', '.join(known_envs())}")
+
+
+def start_cell_dataset(env_id: str) -> str:
+    """The maze's pre-demonstrations from the start cell without wall hits (authors regime)."""
+    n = abco_envs.maze_size(env_id.split(":")[-1])
+    return f"abco/maze{n}x{n}-pre-start-v0"
 
 
 def known_envs() -> tuple[str, ...]:
@@ -94,10 +105,20 @@ class RunConfig:
     seed: int = _opt("seed of everything (same seed, same CPU run)", 0, min=0)
     preset: str = _opt("cpu (compact CNN on images) or paper (the paper's ResNet-18)", "cpu",
                        choices=PRESETS)  # fmt: skip
+    regime: str = _opt("default (abco's data and schedule) or authors (the authors': start-cell "
+                       "pre-demonstrations without wall hits, one IDM and one policy epoch per "
+                       "iteration, alpha 10)", "default", choices=REGIMES)
     iterations: int | None = _opt("alpha: iterations 0..alpha run (iterative methods)", min=0)
     arch: str | None = _opt("network: mlp (vectors), cnn or resnet18 (images)", choices=ARCHS)
     attention: bool | None = _opt("self-attention in both networks (default: the method's)")
-    idm_epochs: int | None = _opt("IDM epochs over I_s per iteration", min=1)
+    idm_input: str | None = _opt("how the IDM reads (s, s'): difference (one encoder over s and "
+                                 "s' - s) or pair (each frame encoded apart; images only)",
+                                 choices=IDM_INPUTS)  # fmt: skip
+    idm_epochs: int | None = _opt("at most this many IDM epochs over I_s per iteration", min=1)
+    idm_patience: int | None = _opt("stop the IDM's epochs after this many without a better "
+                                    "validation accuracy (the best weights are kept)", min=1)
+    idm_validation: int | None = _opt("pre-demonstration transitions held out to measure the "
+                                      "IDM (default: 10%%, at most 2,000)", min=1)
     policy_epochs: int | None = _opt("policy epochs over the expert data per iteration", min=1)
     first_epochs_factor: int | None = _opt("iteration 0 trains both nets this many times longer",
                                            min=1)  # fmt: skip
@@ -133,18 +154,21 @@ class RunConfig:
         """A copy with every ``None`` field filled in.
 
         Order: :data:`DEFAULTS` of the env kind and preset, then :data:`ENV_DEFAULTS`, then
-        ``method_defaults`` (the method's own, :meth:`abco_train.methods.Method.defaults`);
-        fields set by the user always win.
+        :data:`REGIME_DEFAULTS`, then ``method_defaults`` (the method's own,
+        :meth:`abco_train.methods.Method.defaults`); fields set by the user always win.
         """
         key = (env_kind(self.env), self.preset)
         if key not in DEFAULTS:
             raise ConfigError(f"--preset must be one of {', '.join(PRESETS)}, got {self.preset!r}")
         base = {**DEFAULTS[key], **ENV_DEFAULTS.get(self.env.split(":")[-1], {}),
+                **REGIME_DEFAULTS.get((key[0], self.regime), {}),
                 **(method_defaults or {})}  # fmt: skip
         values = asdict(self)
         for name, default in base.items():
             if values[name] is None:
                 values[name] = default
+        if values["pre_data"] == "start":  # the regime's start-cell pre-demonstrations
+            values["pre_data"] = start_cell_dataset(self.env)
         if values["run_dir"] is None:
             values["run_dir"] = str(Path("runs") / f"{self.env}-{self.method}-s{self.seed}")
         return RunConfig(**values)
@@ -156,6 +180,8 @@ class RunConfig:
             ConfigError: The first field out of range, named as its command-line option.
         """
         kind = env_kind(self.env)
+        if kind == "classic" and self.idm_input == "pair":
+            raise ConfigError("--idm-input pair is for frames; vector IDMs read (s, s' - s)")
         if self.arch is not None and self.arch in ARCHS and self.arch not in ARCHS_BY_KIND[kind]:
             raise ConfigError(f"--arch {self.arch} does not fit {self.env}'s observations; use "
                               f"{' or '.join(ARCHS_BY_KIND[kind])}")  # fmt: skip
@@ -190,23 +216,24 @@ class RunConfig:
 #: classic control on state vectors; ``paper`` is the paper's ResNet-18 and its optimiser.
 DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
     ("maze", "cpu"): {
-        "iterations": 2, "arch": "cnn", "attention": True, "idm_epochs": 1, "policy_epochs": 3,
-        "first_epochs_factor": 3, "batch_size": 64, "lr": 1e-3, "idm_samples": 20_000,
+        "iterations": 2, "arch": "cnn", "attention": True, "idm_input": "difference",
+        "idm_epochs": 4, "idm_patience": 1, "policy_epochs": 3, "first_epochs_factor": 3,
+        "batch_size": 64, "lr": 1e-3, "idm_samples": 20_000,
     },
     ("maze", "paper"): {
-        "iterations": 2, "arch": "resnet18", "attention": True, "idm_epochs": 1,
-        "policy_epochs": 3, "first_epochs_factor": 3, "batch_size": 32, "lr": 1e-4,
-        "idm_samples": 20_000,
+        "iterations": 2, "arch": "resnet18", "attention": True, "idm_input": "pair",
+        "idm_epochs": 4, "idm_patience": 1, "policy_epochs": 3, "first_epochs_factor": 3,
+        "batch_size": 32, "lr": 1e-4, "idm_samples": 20_000,
     },
     ("classic", "cpu"): {
-        "iterations": 2, "arch": "mlp", "attention": True, "idm_epochs": 2, "policy_epochs": 4,
-        "first_epochs_factor": 2, "batch_size": 512, "lr": 3e-3, "idm_samples": 50_000,
-        "eval_episodes": 100,
+        "iterations": 2, "arch": "mlp", "attention": True, "idm_input": "difference",
+        "idm_epochs": 2, "idm_patience": 1, "policy_epochs": 4, "first_epochs_factor": 2,
+        "batch_size": 512, "lr": 3e-3, "idm_samples": 50_000, "eval_episodes": 100,
     },
     ("classic", "paper"): {
-        "iterations": 2, "arch": "mlp", "attention": True, "idm_epochs": 2, "policy_epochs": 4,
-        "first_epochs_factor": 2, "batch_size": 32, "lr": 1e-3, "idm_samples": 50_000,
-        "eval_episodes": 100,
+        "iterations": 2, "arch": "mlp", "attention": True, "idm_input": "difference",
+        "idm_epochs": 2, "idm_patience": 1, "policy_epochs": 4, "first_epochs_factor": 2,
+        "batch_size": 32, "lr": 1e-3, "idm_samples": 50_000, "eval_episodes": 100,
     },
 }  # fmt: skip
 
@@ -215,6 +242,17 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     # 2x2-pixel cells on 64x64 frames: both networks need longer to resolve them.
     "AbcoMaze10x10-v0": {"idm_epochs": 2, "policy_epochs": 10},
 }
+
+#: The authors' data and schedule (their public code, where the paper is silent), on top of
+#: the table above: one IDM epoch and one policy epoch per iteration, no longer first
+#: iteration, more iterations; for mazes, pre-demonstrations recorded as an agent that resets
+#: the env would: from the start cell, moves into walls dropped (``{maze}-pre-start-v0``).
+REGIME_DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
+    ("maze", "authors"): {"idm_epochs": 1, "policy_epochs": 1, "first_epochs_factor": 1,
+                          "iterations": 10, "pre_data": "start"},
+    ("classic", "authors"): {"idm_epochs": 1, "policy_epochs": 1, "first_epochs_factor": 1,
+                             "iterations": 10},
+}  # fmt: skip
 
 #: Settings that may differ between a run and its resumption (and between a finished grid
 #: cell and a re-run of the grid): where things are, how loud, how many threads.

@@ -175,10 +175,19 @@ def result_row(config: dict[str, Any], final: dict[str, Any] | None, wall_s: flo
     """
     return {
         "env": config["env"], "method": config["method"], "seed": int(config["seed"]),
-        "run_dir": str(config["run_dir"]), "status": "done" if final is not None else "failed",
+        "run_dir": str(config["run_dir"]), "status": _status(final),
         "final": final, "wall_s": wall_s, "threads": config.get("threads"),
-        "reference": _references(config, cached_only) if final is not None else None, **extra,
+        "reference": _references(config, cached_only) if _status(final) == "done" else None,
+        **extra,
     }  # fmt: skip
+
+
+def _status(final: dict[str, Any] | None) -> str:
+    """``done``; ``failed`` (an error); or the method's failure status (``idm_at_chance``)."""
+    if final is None:
+        return "failed"
+    status = final.get("status", "ok")
+    return "done" if status == "ok" else status
 
 
 def run_cell(config: dict[str, Any], plugins: Sequence[str] = ()) -> dict[str, Any]:
@@ -312,7 +321,8 @@ def run_grid(
             bar.update(1)
             if row["status"] != "done":
                 failed.append(cell.key)
-                bar.write(f"{cell.key}: FAILED ({row.get('error')})")
+                why = row.get("error") or (row.get("final") or {}).get("message")
+                bar.write(f"{cell.key}: FAILED, {row['status']} ({why})")
             elif not quiet:
                 score = headline(row["final"])
                 bar.write(f"{cell.key}: P={score['performance']:.3f} AER={score['aer']:.3f}"

@@ -39,12 +39,26 @@ if TYPE_CHECKING:
     from abco_train.evaluate import Rollouts
 
 __all__ = ["Method", "register", "get_method", "available", "load_plugins", "resolve_config",
-           "PluginError", "BUILTIN_MODULES"]  # fmt: skip
+           "PluginError", "TrainingFailed", "BUILTIN_MODULES"]  # fmt: skip
 
 #: Modules whose import registers the built-in methods (imported on first lookup).
 BUILTIN_MODULES = ("abco_train.abco",)
 
 _REGISTRY: dict[str, type[Method]] = {}
+
+
+class TrainingFailed(RuntimeError):
+    """A method's own health check failed: the run stops and ends with this status, never
+    with a normal-looking result.
+
+    Attributes:
+        status: A short name of what failed (e.g. ``idm_at_chance``), the run's status.
+        stats: The iteration's statistics up to the failure (logged by the harness).
+    """
+
+    def __init__(self, status: str, message: str, stats: dict[str, Any] | None = None) -> None:
+        super().__init__(message)
+        self.status, self.stats = status, dict(stats or {})
 
 
 class PluginError(ImportError):
@@ -81,7 +95,12 @@ class Method(ABC):
 
     @abstractmethod
     def train_iteration(self, iteration: int) -> dict[str, float]:
-        """Learn for one iteration; return scalars to log."""
+        """Learn for one iteration; return scalars to log.
+
+        Raises:
+            TrainingFailed: The method found itself broken (e.g. a model at chance); the run
+                ends with that status instead of a result.
+        """
 
     @abstractmethod
     def act(self, obs: np.ndarray) -> np.ndarray:

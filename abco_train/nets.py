@@ -23,10 +23,11 @@ import torch
 from gymnasium import spaces
 from torch import nn
 
-from abco_train.config import ARCHS
+from abco_train.config import ARCHS, IDM_INPUTS
 
 __all__ = [
     "ARCHS",
+    "IDM_INPUTS",
     "SelfAttention2d",
     "FeatureSelfAttention",
     "VectorEncoder",
@@ -140,10 +141,10 @@ class VectorEncoder(nn.Module):
 
 
 def _image_input(x: torch.Tensor) -> torch.Tensor:
-    """``(B, H, W, 3)`` uint8 -> ``(B, 3, H, W)`` float in ``[0, 1]``."""
+    """``(B, H, W, C)`` images (uint8, or float in ``[-1, 1]``) -> ``(B, C, H, W)`` float."""
     if x.dtype == torch.uint8:
         x = x.float().div_(255.0)
-    return x.permute(0, 3, 1, 2) if x.shape[-1] in (1, 3) else x
+    return x.permute(0, 3, 1, 2)
 
 
 class CompactCNN(nn.Module):
@@ -251,13 +252,19 @@ class PolicyNet(nn.Module):
 
 
 class IDMNet(nn.Module):
-    """Inverse dynamics model: ``head(concat(encoder(s_t), encoder(s_t+1))) -> logits``.
+    """Inverse dynamics model: ``P(a | s_t, s_t+1)`` as logits.
 
-    For vector states the encoder reads the pair as one vector (the paper's 12-input IDM for
-    6-dim states), fed as ``concat(s_t, s_t+1 - s_t)``: the same information, linearly
-    re-expressed so the small state change (e.g. MountainCar's velocity) is standardised on
-    its own scale instead of drowning in the state's. For images one shared encoder encodes
-    both frames.
+    Two ways of reading a transition (:data:`IDM_INPUTS`):
+
+    * ``difference``: one encoder reads ``concat(s_t, s_t+1 - s_t)`` (features for vector
+      states, channels for frames). The same information as the pair, re-expressed so that
+      what changed stands apart: MountainCar's small velocity change is standardised on its
+      own scale, and a maze frame's difference is zero everywhere but the agent's old and new
+      cell. The paper's 12-input vector IDM for 6-dim states is this form.
+    * ``pair`` (frames only): one shared encoder encodes each frame, the head reads both
+      feature vectors (the paper's image IDM). On small cells (2x2 pixels at 10x10) the move
+      must survive the encoder's strides in each frame separately, and it can fail to: the
+      IDM stays at chance.
     """
 
     def __init__(self, encoder: nn.Module, head: nn.Module, concat_inputs: bool) -> None:
@@ -267,7 +274,9 @@ class IDMNet(nn.Module):
     def forward(self, obs: torch.Tensor, next_obs: torch.Tensor) -> torch.Tensor:
         """Action logits for a batch of transitions."""
         if self.concat_inputs:
-            return self.head(self.encoder(torch.cat([obs, next_obs - obs], dim=1)))
+            if obs.dtype == torch.uint8:  # frames: a signed difference needs floats
+                obs, next_obs = obs.float().div_(255.0), next_obs.float().div_(255.0)
+            return self.head(self.encoder(torch.cat([obs, next_obs - obs], dim=-1)))
         both = self.encoder(torch.cat([obs, next_obs], dim=0))
         first, second = both.chunk(2, dim=0)
         return self.head(torch.cat([first, second], dim=1))
@@ -283,6 +292,7 @@ def build_networks(
     n_actions: int,
     arch: str | None = None,
     attention: bool = True,
+    idm_input: str = "difference",
     hidden: int = 12,
     dropout: float = 0.5,
     obs_mean: np.ndarray | None = None,
@@ -297,6 +307,8 @@ def build_networks(
         n_actions: Number of discrete actions.
         arch: One of :data:`ARCHS`; ``None`` picks ``mlp`` or ``cnn`` from the space.
         attention: Include the self-attention modules.
+        idm_input: How the IDM reads a transition, ``difference`` or ``pair`` (frames only;
+            see :class:`IDMNet`).
         hidden: Width of the vector nets (the paper: 12).
         dropout: Dropout of the ResNet heads (the paper: 0.5).
         obs_mean: Per-feature mean for standardising vector states.
@@ -312,6 +324,8 @@ def build_networks(
     if arch == "mlp":
         if len(shape) != 1:
             raise ValueError(f"arch 'mlp' needs vector observations, got shape {shape}")
+        if idm_input != "difference":
+            raise ValueError("vector IDMs read (s, s' - s): idm_input must be 'difference'")
         pm_enc = VectorEncoder(shape[0], hidden, attention)
         idm_enc = VectorEncoder(2 * shape[0], hidden, attention)
         d = shape[0]
@@ -331,19 +345,25 @@ def build_networks(
         )
     if len(shape) != 3:
         raise ValueError(f"arch {arch!r} needs (H, W, C) image observations, got shape {shape}")
+    if idm_input not in IDM_INPUTS:
+        raise ValueError(f"unknown idm_input {idm_input!r}; expected one of {IDM_INPUTS}")
+    fused = idm_input == "difference"
+    idm_shape = (*shape[:2], 2 * shape[2]) if fused else shape  # frame + difference channels
+    encoder = {"cnn": CompactCNN, "resnet18": ResNet18}.get(arch)
+    if encoder is None:
+        raise ValueError(f"unknown arch {arch!r}; expected one of {ARCHS}")
+    pm_enc, idm_enc = encoder(shape, attention), encoder(idm_shape, attention)
+    idm_features = idm_enc.out_features * (1 if fused else 2)
     if arch == "cnn":
-        pm_enc, idm_enc = CompactCNN(shape, attention), CompactCNN(shape, attention)
         pm_head = nn.Sequential(
             nn.Linear(pm_enc.out_features, 128), nn.LeakyReLU(), nn.Linear(128, n_actions)
         )
         idm_head = nn.Sequential(
-            nn.Linear(2 * idm_enc.out_features, 128), nn.LeakyReLU(), nn.Linear(128, n_actions)
+            nn.Linear(idm_features, 128), nn.LeakyReLU(), nn.Linear(128, n_actions)
         )
-        return PolicyNet(pm_enc, pm_head), IDMNet(idm_enc, idm_head, concat_inputs=False)
-    if arch == "resnet18":
-        pm_enc, idm_enc = ResNet18(shape, attention), ResNet18(shape, attention)
-        return (
-            PolicyNet(pm_enc, _head(512, 512, n_actions, dropout)),
-            IDMNet(idm_enc, _head(1024, 1024, n_actions, dropout), concat_inputs=False),
-        )
-    raise ValueError(f"unknown arch {arch!r}; expected one of {ARCHS}")
+        return PolicyNet(pm_enc, pm_head), IDMNet(idm_enc, idm_head, concat_inputs=fused)
+    return (
+        PolicyNet(pm_enc, _head(512, 512, n_actions, dropout)),
+        IDMNet(idm_enc, _head(idm_features, idm_features, n_actions, dropout),
+               concat_inputs=fused),
+    )  # fmt: skip

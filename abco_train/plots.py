@@ -22,15 +22,35 @@ def _pyplot() -> Any:
 
 
 def plot_metrics(history: list[dict[str, Any]], path: Path) -> Path:
-    """P, AER and success rate of the per-iteration evaluations."""
+    """P, AER and success rate of the per-iteration evaluations, and the IDM's held-out
+    accuracy (overall and per action) where the method has an IDM."""
     plt = _pyplot()
-    its = [h["iteration"] for h in history]
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.2))
+    rows = [h for h in history if "eval" in h]
+    its = [h["iteration"] for h in rows]
+    idm = [h for h in history if "idm_val_accuracy" in h.get("train", {})]
+    fig, axes = plt.subplots(1, 4 if idm else 3, figsize=(16 if idm else 12, 3.2))
     for ax, key, title in zip(axes, ("performance", "aer", "success_rate"),
                               ("Performance P", "AER", "Success rate")):  # fmt: skip
-        ax.plot(its, [h["eval"][key] for h in history], marker="o")
+        ax.plot(its, [h["eval"][key] for h in rows], marker="o")
         ax.set_title(title)
         ax.set_xlabel("iteration")
+        ax.grid(alpha=0.3)
+    if idm:
+        ax, x = axes[3], [h["iteration"] for h in idm]
+        ax.plot(x, [h["train"]["idm_val_accuracy"] for h in idm], marker="o", color="black",
+                label="all")  # fmt: skip
+        per_class = [h["train"].get("idm_val_class_accuracy") or [] for h in idm]
+        n = max(map(len, per_class))
+        names = ACTION_NAMES.get(n, [str(a) for a in range(n)])
+        for c in range(n):
+            ax.plot(x, [pc[c] if c < len(pc) else np.nan for pc in per_class], marker=".",
+                    alpha=0.7, label=names[c])  # fmt: skip
+        ax.plot(x, [h["train"].get("idm_chance", np.nan) for h in idm], ls="--", color="grey",
+                label="chance")  # fmt: skip
+        ax.set_title("IDM held-out accuracy")
+        ax.set_xlabel("iteration")
+        ax.set_ylim(0, 1.02)
+        ax.legend(fontsize=7, ncol=2)
         ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=100)

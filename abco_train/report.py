@@ -38,11 +38,13 @@ __all__ = [
 MAZES = abco_envs.MAZE_IDS
 TABLE1_ENVS = ("CartPole-v1", "Acrobot-v1", "MountainCar-v0", *MAZES)
 #: Table 1 rows -> the trainer's methods (abco_train.abco.VARIANTS).
-TABLE1_METHODS = {"bc": "BC", "bco-alpha": "BCO(α)", "abco": "ABCO(α)"}
+TABLE1_METHODS = {"bc": "BC", "bco-alpha": "BCO(α)", "bco-alpha-torabi": "BCO(α), Torabi",
+                  "abco": "ABCO(α)"}  # fmt: skip
 #: Table 2 rows (ablation, 5x5 maze) -> the trainer's methods. The paper's "BCO" row repeats
 #: Table 1's BCO on the 5x5 maze (P -0.112), i.e. BCO(α).
 TABLE2_METHODS = {
-    "bco-alpha": "BCO(α)", "attention": "Attention", "sampling-partial": "Partial sampling",
+    "bco-alpha": "BCO(α)", "bco-alpha-torabi": "BCO(α), Torabi", "attention": "Attention",
+    "sampling-partial": "Partial sampling",
     "sampling-whole": "Whole sampling", "abco": "ABCO (attention + partial sampling)",
     "abco-whole": "ABCO (attention + whole sampling)",
 }  # fmt: skip
@@ -75,6 +77,14 @@ class Run:
     path: Path
     final: dict[str, Any] | None
     row: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def status(self) -> str:
+        """``ok`` (a result), ``unfinished`` (no final.json), or the status of a run its
+        method stopped (e.g. ``idm_at_chance``: no result, by design)."""
+        if self.final is None:
+            return "unfinished"
+        return str(self.final.get("status", "ok"))
 
     def metrics(self) -> list[dict[str, Any]]:
         """The per-iteration records of ``metrics.jsonl``."""
@@ -113,7 +123,8 @@ class _Grid:
 
     def __init__(self, runs: list[Run]) -> None:
         self.runs = runs
-        self.done = [r for r in runs if r.final is not None]
+        self.done = [r for r in runs if r.status == "ok"]
+        self.stopped = [r for r in runs if r.status not in ("ok", "unfinished")]
         self.seeds = sorted({r.seed for r in runs})
         self.by_cell: dict[tuple[str, str], list[Run]] = {}
         for r in self.done:
@@ -154,7 +165,9 @@ def _table(grid: _Grid, rows: list[tuple[str, str, str, tuple[float, float] | No
         cells = [env, label]
         p_stats = grid.stats(env, method, evaluation, "performance")
         a_stats = grid.stats(env, method, evaluation, "aer")
-        cells.append(str(p_stats.n if p_stats else 0))
+        stopped = sum(r.env == env and r.method == method for r in grid.stopped)
+        cells.append(str(p_stats.n if p_stats else 0) + (f" (+{stopped} stopped)" if stopped
+                                                         else ""))  # fmt: skip
         for k, (metric, s) in enumerate((("performance", p_stats), ("aer", a_stats))):
             cells += [_ci(s), _fmt(s.iqm) if s else "–"]
             if paper_cols:
@@ -178,8 +191,11 @@ def _goals(grid: _Grid, wall: float | None) -> list[str]:
         aer, perf = grid.stats(env, "abco", ev, "aer"), grid.stats(env, "abco", ev, "performance")
         goal = GOALS["aer"][env]
         verdicts = []
+        stopped = sum(r.env == env and r.method == "abco" for r in grid.stopped)
         for s, target in ((aer, goal), (perf, GOALS["performance"])):
-            if s is None:
+            if stopped:
+                verdicts.append(f"**not met: {stopped} run(s) stopped**")
+            elif s is None:
                 verdicts.append("not run")
             elif s.mean >= target - 1e-9:
                 verdicts.append("met")
@@ -208,6 +224,9 @@ def _missing(grid: _Grid) -> list[str]:
         if lost:
             what = "all seeds" if len(lost) == len(seeds) else "seeds " + ", ".join(map(str, lost))
             lines.append(f"- {env} / {method}: missing {what}")
+    for r in grid.stopped:
+        lines.append(f"- {r.env} / {r.method} / seed {r.seed}: stopped, {r.status} "
+                     f"({(r.final or {}).get('message', '')})")
     for r in grid.runs:
         if r.final is None:
             state = "failed" if r.row.get("status") == "failed" else "unfinished"
@@ -397,6 +416,17 @@ def plot_label_distributions(grid: _Grid, env: str, methods: Sequence[str], path
 
 # -- the report -----------------------------------------------------------------------------
 
+def _settings(runs: list[Run]) -> str:
+    """The regime and preset of the grid's runs (from their config.json)."""
+    seen: set[tuple[str, str]] = set()
+    for r in runs:
+        path = r.path / "config.json"
+        if path.exists():
+            cfg = json.loads(path.read_text())
+            seen.add((str(cfg.get("regime", "default")), str(cfg.get("preset", "cpu"))))
+    return "; ".join(f"regime {g}, preset {p}" for g, p in sorted(seen)) or "unknown"
+
+
 CSV_FIELDS = ("table", "env", "method", "evaluation", "metric", "seeds", "mean", "ci_low",
               "ci_high", "iqm", "iqm_ci_low", "iqm_ci_high", "paper")  # fmt: skip
 
@@ -428,10 +458,10 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
     grid = _Grid(runs)
     csv_rows: list[dict[str, Any]] = []
     wall, wall_lines = _wall(runs_dir, grid)
-    t1 = [(e, m, label, PAPER_TABLE1[m][e]) for e in TABLE1_ENVS
+    t1 = [(e, m, label, PAPER_TABLE1.get(m, {}).get(e)) for e in TABLE1_ENVS
           for m, label in TABLE1_METHODS.items()]  # fmt: skip
     t1_test = [(e, m, label, None) for e in MAZES for m, label in TABLE1_METHODS.items()]
-    t2 = [(TABLE2_ENV, m, label, PAPER_TABLE2[m]) for m, label in TABLE2_METHODS.items()]
+    t2 = [(TABLE2_ENV, m, label, PAPER_TABLE2.get(m)) for m, label in TABLE2_METHODS.items()]
     t2_test = [(TABLE2_ENV, m, label, None) for m, label in TABLE2_METHODS.items()]
     files: dict[str, Path] = {}
     perf_png = plot_performance(grid, out / "performance_per_iteration.png")
@@ -439,7 +469,10 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
                                           out / "idm_label_distribution.png")  # fmt: skip
 
     md = [f"# ABCO benchmark: {runs_dir}", "",
-          f"{len(grid.done)} finished runs, seeds {', '.join(map(str, grid.seeds)) or 'none'}.",
+          f"{len(grid.done)} finished runs, seeds {', '.join(map(str, grid.seeds)) or 'none'};"
+          f" {len(grid.stopped)} run(s) stopped by their method's health check (e.g. an IDM at"
+          " chance: no result, counted as '+k stopped' beside the seeds and listed below).",
+          f"Settings: {_settings(runs)}.",
           "P and AER: mean over seeds with a 95% bootstrap CI, and the IQM. Classic control:",
           "the final evaluation's episodes (unseen seeds); mazes: every layout of the split,",
           "the paper's protocol (4th visit to a cell ends the episode with return -1).", "",
@@ -459,7 +492,7 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
           *_table(grid, t2_test, "test", csv_rows, "table2-test"),
           "", "## Every method found (train split; all evaluations in the CSV)", "",
           *_all_runs(grid, csv_rows),
-          "", "## Missing or unfinished cells", "", *_missing(grid),
+          "", "## Missing, unfinished, failed or stopped cells", "", *_missing(grid),
           "", "## Reference returns (P = (R - random) / (expert - random))", "",
           "Mazes normalise per layout; the means over each split's layouts are shown.", "",
           *_references(grid), "", "## Wall time", "", *wall_lines, "", "## Plots", ""]  # fmt: skip

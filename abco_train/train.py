@@ -25,7 +25,7 @@ import torch
 from abco_train.config import ConfigError, RunConfig, comparable
 from abco_train.data import TrainingData, load_training_data
 from abco_train.evaluate import rollout, score
-from abco_train.methods import Method, get_method, resolve_config
+from abco_train.methods import Method, TrainingFailed, get_method, resolve_config
 from abco_train.run_folder import (
     CHECKPOINT,
     CONFIG,
@@ -137,7 +137,11 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
                disable=cfg.quiet, unit="iter")  # fmt: skip
     for i in bar:
         t0 = time.perf_counter()
-        stats = method.train_iteration(i)
+        try:
+            stats = method.train_iteration(i)
+        except TrainingFailed as failure:  # never a normal-looking result
+            bar.close()
+            return _failed(cfg, run_dir, i, failure, history)
         t_train = time.perf_counter() - t0
         roll = rollout(method.act, cfg.env, protocol=cfg.protocol, record=True,
                        **_eval_kwargs(cfg, data, "train", EVAL_SEED))  # fmt: skip
@@ -167,6 +171,19 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
     write_atomic(run_dir / FINAL, json.dumps(final, indent=2))
     return final
 
+
+def _failed(cfg: RunConfig, run_dir: Path, iteration: int, failure: TrainingFailed,
+            history: list[dict[str, Any]]) -> dict[str, Any]:  # fmt: skip
+    """Record a failed run: its last iteration's statistics, and a ``final.json`` with the
+    failure's status and message and no evaluation (nothing to average by mistake)."""
+    record = {"iteration": iteration, "train": failure.stats, "status": failure.status}
+    with (run_dir / METRICS).open("a") as f:
+        f.write(json.dumps(record) + "\n")
+    final = {"env": cfg.env, "method": cfg.method, "seed": cfg.seed, "status": failure.status,
+             "message": str(failure), "iteration": iteration,
+             "seconds": float(sum(h["seconds"] for h in history))}  # fmt: skip
+    write_atomic(run_dir / FINAL, json.dumps(final, indent=2))
+    return final
 
 def _load_checkpoint(path: Path, device: str) -> dict[str, Any] | None:
     """The checkpoint's state on ``device`` (a GPU run resumes on CPU), ``None`` without one.
@@ -207,7 +224,8 @@ def final_evaluation(
     from abco_train import plots
 
     maze = data.is_maze
-    results: dict[str, Any] = {"env": cfg.env, "method": cfg.method, "seed": cfg.seed}
+    results: dict[str, Any] = {"env": cfg.env, "method": cfg.method, "seed": cfg.seed,
+                               "status": "ok"}  # fmt: skip
     settings = (
         [(s, p) for s in ("train", "test") for p in ("paper", "standard")] if maze else
         [("episodes", "standard")]
@@ -236,7 +254,10 @@ def final_evaluation(
 
 
 def format_table(final: dict[str, Any]) -> str:
-    """The final evaluation as a text table."""
+    """The final evaluation as a text table (a failed run: its status and message)."""
+    if final.get("status", "ok") != "ok":
+        return (f"{final['method']} on {final['env']} (seed {final['seed']}): FAILED "
+                f"({final['status']}) at iteration {final.get('iteration')}: {final['message']}")
     rows = [(k, v) for k, v in final.items() if isinstance(v, dict) and "performance" in v]
     lines = [f"{final['method']} on {final['env']} (seed {final['seed']})",
              f"{'evaluation':<18}{'P':>8}{'AER':>10}{'success':>9}{'episodes':>10}"]

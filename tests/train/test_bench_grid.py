@@ -126,7 +126,7 @@ def test_report_from_grid(grid: dict[str, Any], tmp_path: Path) -> None:
     md = (tmp_path / "report.md").read_text()
     for heading in ("## Table 1: train split", "## Table 1, mazes on the held-out test split",
                     "## Table 2: ablation", "## Goals for ABCO", "## Reference returns",
-                    "## Wall time", "## Missing or unfinished cells"):  # fmt: skip
+                    "## Wall time", "## Missing, unfinished, failed or stopped cells"):  # fmt: skip
         assert heading in md
     assert "AbcoMaze5x5-v0 / abco: missing all seeds" in md  # cells not in the tiny grid
     assert "CartPole-v1 / bc: missing all seeds" in md

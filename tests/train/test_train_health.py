@@ -1,0 +1,140 @@
+"""Training that cannot fail silently: the IDM's held-out health, early stopping, the dead-IDM
+rule, equal budgets across variants, Torabi's BCO(alpha), the authors' regime."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from train_testing import tiny_config
+
+import abco_data
+from abco_train import abco as abco_module
+from abco_train import grid, report
+from abco_train.cli import main
+from abco_train.config import RunConfig
+from abco_train.nets import build_networks
+from abco_train.train import train
+
+
+def _metrics(run_dir) -> list[dict]:
+    return [json.loads(x) for x in (run_dir / "metrics.jsonl").read_text().splitlines()]
+
+
+def test_validation_split_is_fixed_and_disjoint() -> None:
+    a_train, a_held = abco_module.validation_split(5_000, None, seed=3)
+    b_train, b_held = abco_module.validation_split(5_000, None, seed=3)
+    assert np.array_equal(a_held, b_held) and len(a_held) == 500
+    assert len(np.intersect1d(a_train, a_held)) == 0 and len(a_train) + len(a_held) == 5_000
+    assert len(abco_module.validation_split(100_000, None, seed=0)[1]) == 2_000  # the cap
+    assert not np.array_equal(abco_module.validation_split(5_000, None, seed=4)[1], a_held)
+
+
+def test_every_iteration_logs_the_idm_held_out_accuracy(tiny_data, tmp_path) -> None:
+    train(tiny_config("CartPole-v1", "abco", tiny_data, tmp_path / "run", idm_epochs=3,
+                      plots=True))  # fmt: skip
+    for record in _metrics(tmp_path / "run"):
+        stats = record["train"]
+        assert 0.0 <= stats["idm_val_accuracy"] <= 1.0
+        assert len(stats["idm_val_class_accuracy"]) == 2 and 1 <= stats["idm_epochs"] <= 3
+        assert 0.5 <= stats["idm_chance"] <= 1.0
+    assert (tmp_path / "run" / "metrics.png").exists()
+
+
+def test_idm_stops_when_held_out_accuracy_stops_improving(tiny_data, tmp_path, monkeypatch):
+    monkeypatch.setattr(abco_module.ABCO, "validate_idm",
+                        lambda self: {"accuracy": 0.9, "class_accuracy": [0.9, 0.9]})
+    train(tiny_config("CartPole-v1", "bco", tiny_data, tmp_path / "run", idm_epochs=6,
+                      idm_patience=2))  # fmt: skip
+    assert _metrics(tmp_path / "run")[0]["train"]["idm_epochs"] == 3  # 1 better + 2 stale
+
+
+def test_an_idm_at_chance_is_reinitialised_then_stops_the_run(tiny_data, tmp_path, monkeypatch,
+                                                              capsys) -> None:  # fmt: skip
+    calls = []
+
+    def dead(self):
+        calls.append(1)
+        return {"accuracy": 0.0, "class_accuracy": [0.0, 0.0]}
+
+    monkeypatch.setattr(abco_module.ABCO, "validate_idm", dead)
+    monkeypatch.setattr(abco_module, "MIN_JUDGED", 0)
+    cfg = tiny_config("CartPole-v1", "abco", tiny_data, tmp_path / "run")
+    final = train(cfg)
+    assert final["status"] == "idm_at_chance" and "at chance" in final["message"]
+    assert not any(isinstance(v, dict) and "performance" in v for v in final.values())
+    last = _metrics(tmp_path / "run")[-1]
+    assert last["status"] == "idm_at_chance" and last["train"]["idm_reinitialised"] == 1
+    assert len(calls) >= 4  # trained, judged, re-initialised, trained again, judged again
+    # the command line says so and fails; a grid row and the report count it as stopped
+    args = ["train", "--env", "CartPole-v1", "--method", "abco", "--run-dir", cfg.run_dir,
+            "--expert-data", cfg.expert_data, "--pre-data", cfg.pre_data, "--quiet",
+            "--iterations", "1", "--idm-epochs", "1", "--policy-epochs", "1",
+            "--first-epochs-factor", "1", "--eval-layouts", "2", "--eval-episodes", "2",
+            "--eval-max-steps", "30", "--no-plots", "--plot-layouts", "2"]  # fmt: skip
+    assert main(args) == 1
+    assert "FAILED (idm_at_chance)" in capsys.readouterr().err
+    row = grid.result_row({"env": "CartPole-v1", "method": "abco", "seed": 0,
+                           "run_dir": cfg.run_dir}, final, 1.0)  # fmt: skip
+    assert row["status"] == "idm_at_chance"
+    runs = report.Run("CartPole-v1", "abco", 0, tmp_path / "run", final)
+    assert runs.status == "idm_at_chance" and runs.values("episodes", "performance") is None
+
+
+def test_one_iteration_variants_get_the_same_policy_epochs(tiny_data, tmp_path) -> None:
+    kw = {"iterations": 2, "policy_epochs": 2, "first_epochs_factor": 3}
+    train(tiny_config("CartPole-v1", "abco", tiny_data, tmp_path / "abco", **kw))
+    train(tiny_config("CartPole-v1", "bc", tiny_data, tmp_path / "bc", **kw))
+    iterated = sum(r["train"]["policy_epochs"] for r in _metrics(tmp_path / "abco"))
+    assert iterated == 2 * (3 + 2) == _metrics(tmp_path / "bc")[0]["train"]["policy_epochs"]
+
+
+def test_torabi_bco_alpha_keeps_i_pre_and_adds_every_post_demonstration(tiny_data, tmp_path):
+    train(tiny_config("AbcoMaze3x3-v0", "bco-alpha-torabi", tiny_data, tmp_path / "t",
+                      iterations=2))  # fmt: skip
+    rows = _metrics(tmp_path / "t")
+    sizes = [r["train"]["idm_samples"] for r in rows]
+    assert sizes[1] == rows[0]["post"]["is_from_pre"] + rows[0]["post"]["pos_transitions"]
+    assert rows[1]["post"]["is_from_pre"] == rows[0]["post"]["is_from_pre"]  # I_pre stays
+    assert rows[1]["post"]["pos_transitions"] > rows[0]["post"]["pos_transitions"]  # grows
+    assert sizes[2] > sizes[1]
+
+
+def test_the_authors_regime() -> None:
+    cfg = RunConfig(env="AbcoMaze5x5-v0", regime="authors").resolved()
+    assert (cfg.pre_data, cfg.idm_epochs, cfg.policy_epochs, cfg.first_epochs_factor,
+            cfg.iterations) == ("abco/maze5x5-pre-start-v0", 1, 1, 1, 10)
+    assert RunConfig(env="AbcoMaze5x5-v0").resolved().pre_data is None
+    spec = abco_data.spec("abco/maze5x5-pre-start-v0")
+    assert spec.params["drop_wall_hits"] and spec.params["from_start_cell"]
+
+
+def test_start_cell_pre_demonstrations_start_at_the_start_and_never_hit_a_wall(tmp_path):
+    path = abco_data.generate("abco/maze3x3-pre-start-v0", tmp_path / "s.hdf5", progress=False,
+                              layouts=3, episodes_per_layout=3, reference_episodes=2)
+    ds = abco_data.open_dataset(path)
+    for episode in ds.episodes():
+        assert tuple(episode.positions[0]) == (0, 0)
+        assert np.all(np.any(episode.positions[1:] != episode.positions[:-1], axis=1))
+
+
+@pytest.mark.parametrize(("idm_input", "channels"), [("difference", 6), ("pair", 3)])
+def test_image_idm_input(idm_input, channels) -> None:
+    from gymnasium import spaces
+
+    space = spaces.Box(0, 255, (64, 64, 3), np.uint8)
+    _, idm = build_networks(space, 4, "cnn", True, idm_input)
+    assert idm.encoder.body[0].in_channels == channels
+    frames = np.random.default_rng(0).integers(0, 256, (2, 2, 64, 64, 3), dtype=np.uint8)
+    import torch
+
+    assert idm(torch.from_numpy(frames[0]), torch.from_numpy(frames[1])).shape == (2, 4)
+
+
+def test_same_seed_same_maze_run(tiny_data, tmp_path) -> None:
+    runs = [train(tiny_config("AbcoMaze3x3-v0", "abco", tiny_data, tmp_path / d)) for d in "ab"]
+    strip = lambda rows: [{k: v for k, v in r.items() if not k.startswith("seconds")}  # noqa: E731
+                          for r in rows]  # fmt: skip
+    assert strip(_metrics(tmp_path / "a")) == strip(_metrics(tmp_path / "b"))
+    assert runs[0]["train/paper"] == runs[1]["train/paper"]
