@@ -147,7 +147,7 @@ def _cmd_push(args: argparse.Namespace) -> int:
 
 
 def _add_actions(sub: Any) -> None:
-    p = sub.add_parser("list", help="list the twelve datasets")
+    p = sub.add_parser("list", help="list the datasets")
     p.add_argument("--cache-dir", help="abco dataset cache (default $ABCO_DATA_HOME)")
     p.set_defaults(func=_cmd_list)
     p = sub.add_parser("info", help="show a dataset's parameters and, if cached, its contents")

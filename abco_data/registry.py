@@ -1,4 +1,4 @@
-"""The twelve abco datasets: their ids and the parameters that create each one.
+"""The abco datasets: their ids and the parameters that create each one.
 
 Ids read ``abco/{name}-{kind}-v0``: ``name`` is one of the six environments, ``kind`` is
 ``expert`` or ``pre`` (pre-demonstrations), and the trailing version changes whenever the
@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
 
+import abco_envs
 from abco_data.errors import UnknownDatasetError
 
 __all__ = ["DatasetSpec", "DATASET_IDS", "ENV_NAMES", "dataset_id", "spec", "is_maze"]
@@ -103,7 +104,7 @@ class DatasetSpec:
 
 def is_maze(env_id: str) -> bool:
     """Whether ``env_id`` is an abco maze id."""
-    return env_id.split(":")[-1].startswith("AbcoMaze")
+    return abco_envs.is_maze(env_id)
 
 
 def _normalise_kind(kind: str) -> str:
@@ -123,7 +124,7 @@ def dataset_id(env_id: str, kind: str) -> str:
         UnknownDatasetError: No dataset exists for ``env_id``.
         ValueError: Unknown ``kind``.
     """
-    name = ENV_NAMES.get(env_id.split(":")[-1])
+    name = ENV_NAMES.get(abco_envs.env_name(env_id))
     if name is None:
         raise UnknownDatasetError(
             f"no abco dataset for env {env_id!r}; envs with datasets: {', '.join(ENV_NAMES)}")

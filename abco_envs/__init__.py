@@ -21,7 +21,7 @@ from abco_envs.errors import (
     OptionOutOfRangeError,
     UnknownEnvError,
 )
-from abco_envs.ids import CLASSIC_IDS, MAZE_IDS, MAZE_SIZES, maze_size
+from abco_envs.ids import CLASSIC_IDS, MAZE_IDS, MAZE_SIZES, env_name, is_maze, maze_size
 from abco_envs.maze import Action, MazeEnv, MazeVectorEnv, layout_pool
 from abco_envs.maze.rules import MAX_EPISODE_STEPS
 
@@ -49,6 +49,8 @@ __all__ = [
     "MazeVectorEnv",
     "OptionOutOfRangeError",
     "UnknownEnvError",
+    "env_name",
+    "is_maze",
     "layout_pool",
     "maze_size",
 ]

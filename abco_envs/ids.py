@@ -37,6 +37,12 @@ def env_name(env_id: object) -> str:
     return env_id.split(":")[-1]
 
 
+def is_maze(env_id: str) -> bool:
+    """Whether ``env_id`` (with or without ``abco_envs:``) is one of the abco mazes: the one
+    answer to that question in the project."""
+    return env_name(env_id) in MAZE_IDS
+
+
 def maze_size(env_id: str) -> int:
     """``"AbcoMaze5x5-v0"`` (with or without ``abco_envs:``) -> 5.
 

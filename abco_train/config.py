@@ -67,8 +67,8 @@ def env_kind(env_id: str) -> str:
     Raises:
         ConfigError: ``env_id`` is none of the six environments abco trains on.
     """
-    name = env_id.split(":")[-1]
-    if name in abco_envs.MAZE_IDS:
+    name = abco_envs.env_name(env_id)
+    if abco_envs.is_maze(name):
         return "maze"
     if name in abco_envs.CLASSIC_IDS:
         return "classic"
@@ -77,7 +77,7 @@ def env_kind(env_id: str) -> str:
 
 def start_cell_dataset(env_id: str) -> str:
     """The maze's pre-demonstrations from the start cell without wall hits (authors regime)."""
-    n = abco_envs.maze_size(env_id.split(":")[-1])
+    n = abco_envs.maze_size(env_id)
     return f"abco/maze{n}x{n}-pre-start-v0"
 
 
@@ -160,7 +160,7 @@ class RunConfig:
         key = (env_kind(self.env), self.preset)
         if key not in DEFAULTS:
             raise ConfigError(f"--preset must be one of {', '.join(PRESETS)}, got {self.preset!r}")
-        base = {**DEFAULTS[key], **ENV_DEFAULTS.get(self.env.split(":")[-1], {}),
+        base = {**DEFAULTS[key], **ENV_DEFAULTS.get(abco_envs.env_name(self.env), {}),
                 **REGIME_DEFAULTS.get((key[0], self.regime), {}),
                 **(method_defaults or {})}  # fmt: skip
         values = asdict(self)

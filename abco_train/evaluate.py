@@ -161,7 +161,7 @@ def rollout(
                 looped = (visits[active, cells] >= PAPER_MAX_VISITS) & ~terminated[active]
                 returns[active[looped]] = PAPER_FAIL_RETURN
                 ended |= looped
-        elif env_id.split(":")[-1].startswith("CartPole"):
+        elif abco_envs.env_name(env_id) == "CartPole-v1":
             successes[active] = lengths[active] >= CARTPOLE_GOAL_STEPS
         else:
             successes[active] = terminated[active]
