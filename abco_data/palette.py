@@ -243,13 +243,18 @@ class PaletteDecoder:
     def _groups_into(self, table: np.ndarray, piece: np.ndarray, dest: np.ndarray, size: int,
                      dtype: str) -> None:
         """Look up each uint16 of ``piece``: ``size`` bytes of a ``table`` item stored each."""
-        n = piece.size // 2 - 1  # groups by the fast path; its last store ends early
-        done = 0
+        pairs = piece.size // 2
+        n = pairs - 1  # groups by the fast path; its last store would end past ``dest``
         if n > 0:
             stores = np.ndarray((n,), dtype=dtype, buffer=dest, strides=(size,))
             # np.take, not fancy indexing: about twice as fast into a cache-sized block.
             stores[...] = np.take(table, piece[: 2 * n].view("<u2"))
-            done = n * size
-        rest = piece[2 * n :]
-        idx = unpack4(rest) if self.packed else rest
-        dest[done:] = self._padded[idx].reshape(-1)
+        done = max(n, 0) * size
+        if pairs:  # the last pair: its table entry's first ``size`` bytes
+            entries = table.view(np.uint8).reshape(len(table), -1)
+            dest[done : done + size] = entries[int(piece[2 * n]) | int(piece[2 * n + 1]) << 8,
+                                               :size]
+            done += size
+        if piece.size % 2:  # an odd byte at the end
+            rest = piece[-1:]
+            dest[done:] = self._padded[unpack4(rest) if self.packed else rest].reshape(-1)

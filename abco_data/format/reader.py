@@ -8,6 +8,7 @@ view, opened on first use in the process that reads (h5py handles must not cross
 from __future__ import annotations
 
 import errno
+import math
 import os
 import zlib
 from collections.abc import Iterator
@@ -93,7 +94,8 @@ class ObservationReader:
             self.decoder.out_shape(self.ds.shape)
         self.dtype = np.dtype(np.uint8) if self.decoder is not None else self.ds.dtype
         self._raw_chunks = self.decoder is not None and _deflated_row_chunks(self.ds)
-        self._chunk_bytes = int(np.prod(self.ds.chunks)) if self._raw_chunks else 0
+        # The chunk shape, read once (h5py's properties cost microseconds a call).
+        self._chunk: tuple[int, ...] = self.ds.chunks if self._raw_chunks else ()
 
     def __len__(self) -> int:
         return self.shape[0]
@@ -119,7 +121,7 @@ class ObservationReader:
             self._read_decoded(start, stop, out)
             return out
         # Whole chunks inflated here, partial ones at the ends through HDF5 (and its cache).
-        n = self.ds.chunks[0]
+        n = self._chunk[0]
         first = min(-(-start // n) * n, stop)
         last = stop if stop == len(self) else max(first, stop // n * n)
         self._read_decoded(start, first, out[: first - start])
@@ -152,10 +154,10 @@ class ObservationReader:
         unexpected (no storage, a skipped filter, a zlib error, a wrong size) falls back to
         HDF5, which reads it or raises the same errors as before.
         """
-        n, size = self.ds.chunks[0], self._chunk_bytes
+        n, size = self._chunk[0], math.prod(self._chunk)
         data = b""
         try:
-            mask, raw = self.ds.id.read_direct_chunk((c * n,) + (0,) * (self.ds.ndim - 1))
+            mask, raw = self.ds.id.read_direct_chunk((c * n, *(0 for _ in self._chunk[1:])))
             if not mask:
                 data = zlib.decompress(raw, bufsize=size)
         except (RuntimeError, zlib.error):
@@ -163,7 +165,7 @@ class ObservationReader:
         if len(data) != size:
             self._read_decoded(c * n, c * n + len(out), out)
             return
-        stored = np.frombuffer(data, dtype=self.ds.dtype).reshape(n, *self.ds.shape[1:])
+        stored = np.frombuffer(data, dtype=np.uint8).reshape(self._chunk)
         self.decoder.decode_into(stored[: len(out)], out)
 
     def rows(self, rows: np.ndarray) -> np.ndarray:
