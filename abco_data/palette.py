@@ -26,6 +26,8 @@ Example:
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 __all__ = ["MAX_COLOURS", "MAX_COLOURS_4BIT", "PaletteEncoder", "PaletteDecoder",
@@ -140,6 +142,26 @@ def _first_appearances(codes: np.ndarray) -> np.ndarray:
     return values[np.argsort(first, kind="stable")]
 
 
+@functools.lru_cache(maxsize=16)
+def _pair_table(padded: bytes, packed: bool) -> np.ndarray:
+    """:class:`PaletteDecoder`'s table for a ``(256, 3)`` padded palette (read-only).
+
+    Entry ``w`` is what the little-endian ``uint16`` ``w`` of two stored bytes decodes to:
+    packed, 4 pixels (12 bytes of a ``V16`` entry); else 2 pixels (6 bytes of a ``<u8``).
+    """
+    palette = np.frombuffer(padded, dtype=np.uint8).reshape(MAX_COLOURS, 3)
+    byte = np.arange(256)
+    # The RGB bytes of one stored byte: two 4-bit indices (low nibble first), or one index.
+    one = np.concatenate([palette[byte & 15], palette[byte >> 4]], 1) if packed else palette
+    width = one.shape[1]
+    table = np.zeros((256, 256, 16 if packed else 8), dtype=np.uint8)  # [high, low byte]
+    table[:, :, :width] = one[None, :, :]  # the low byte comes first
+    table[:, :, width : 2 * width] = one[:, None, :]
+    table = table.reshape(1 << 16, -1).view("V16" if packed else "<u8").ravel()
+    table.flags.writeable = False
+    return table
+
+
 def _fast_path_works() -> bool:
     """Check once that overlapping strided stores land in order (they do in numpy's loops)."""
     rng = np.random.default_rng(0)
@@ -179,20 +201,12 @@ class PaletteDecoder:
             if PaletteDecoder._fast_ok is None:
                 PaletteDecoder._fast_ok = _fast_path_works()
             _fast = PaletteDecoder._fast_ok
-        self._table: np.ndarray | None = None
-        if _fast and packed:
-            # A uint16 of two packed bytes holds 4 pixels: 12 bytes of a 16-byte entry.
-            word = np.arange(1 << 16)
-            table = np.zeros((1 << 16, 16), dtype=np.uint8)
-            for k in range(4):
-                table[:, 3 * k : 3 * k + 3] = self._padded[(word >> (4 * k)) & 15]
-            self._table = table.view("V16").ravel()
-        elif _fast:
-            # A uint16 of two indices holds 2 pixels: 6 bytes of an 8-byte entry.
-            table = np.zeros((MAX_COLOURS, MAX_COLOURS, 8), dtype=np.uint8)
-            table[:, :, 0:3] = self._padded[None, :, :]  # low byte: first pixel
-            table[:, :, 3:6] = self._padded[:, None, :]  # high byte: second pixel
-            self._table = table.reshape(-1, 8).view("<u8").ravel()
+        self._fast = _fast
+
+    @property
+    def _table(self) -> np.ndarray | None:
+        """The fast path's look-up table (built on first use, shared per palette), or None."""
+        return _pair_table(self._padded.tobytes(), self.packed) if self._fast else None
 
     def out_shape(self, shape: tuple[int, ...]) -> tuple[int, ...]:
         """Shape of the frames decoded from stored data of ``shape``."""
@@ -209,7 +223,8 @@ class PaletteDecoder:
         if out.shape != self.out_shape(data.shape):
             raise ValueError(f"out has shape {out.shape}, expected"
                              f" {self.out_shape(data.shape)}")
-        if self._table is None or not out.flags.c_contiguous:
+        table = self._table
+        if table is None or not out.flags.c_contiguous:
             out[...] = self._padded[unpack4(data) if self.packed else data]
             return
         flat = np.ascontiguousarray(data, dtype=np.uint8).reshape(-1)
@@ -221,19 +236,25 @@ class PaletteDecoder:
             at = 3 * per_byte * start
             target = dest[at : at + 3 * per_byte * len(piece)]
             if self.packed:
-                self._groups_into(piece, target, 12, "V16", 16)
+                self._groups_into(table, piece, target, 12, "V16")
             else:
-                self._groups_into(piece, target, 6, "<u8", 8)
+                self._groups_into(table, piece, target, 6, "<u8")
 
-    def _groups_into(self, piece: np.ndarray, dest: np.ndarray, size: int, dtype: str,
-                     width: int) -> None:
-        """Look up each uint16 of ``piece``: ``size`` bytes of a ``width``-byte store each."""
-        n = piece.size // 2 - 1  # groups by the fast path; its last store ends early
-        done = 0
+    def _groups_into(self, table: np.ndarray, piece: np.ndarray, dest: np.ndarray, size: int,
+                     dtype: str) -> None:
+        """Look up each uint16 of ``piece``: ``size`` bytes of a ``table`` item stored each."""
+        pairs = piece.size // 2
+        n = pairs - 1  # groups by the fast path; its last store would end past ``dest``
         if n > 0:
             stores = np.ndarray((n,), dtype=dtype, buffer=dest, strides=(size,))
-            stores[...] = self._table[piece[: 2 * n].view("<u2")]
-            done = n * size
-        rest = piece[2 * n :]
-        idx = unpack4(rest) if self.packed else rest
-        dest[done:] = self._padded[idx].reshape(-1)
+            # np.take, not fancy indexing: about twice as fast into a cache-sized block.
+            stores[...] = np.take(table, piece[: 2 * n].view("<u2"))
+        done = max(n, 0) * size
+        if pairs:  # the last pair: its table entry's first ``size`` bytes
+            entries = table.view(np.uint8).reshape(len(table), -1)
+            dest[done : done + size] = entries[int(piece[2 * n]) | int(piece[2 * n + 1]) << 8,
+                                               :size]
+            done += size
+        if piece.size % 2:  # an odd byte at the end
+            rest = piece[-1:]
+            dest[done:] = self._padded[unpack4(rest) if self.packed else rest].reshape(-1)

@@ -52,6 +52,26 @@ def test_decoder_matches_palette_indexing(shape):
             np.testing.assert_array_equal(dec.decode(data), palette[idx])
             dec.BLOCK_PIXELS = 12  # many blocks, odd and even sizes
             np.testing.assert_array_equal(dec.decode(data), palette[idx])
+            out = np.zeros((*idx.shape[:-1], 2 * idx.shape[-1], 3), np.uint8)[..., ::2, :]
+            dec.decode_into(data, out)  # a strided output
+            np.testing.assert_array_equal(out, palette[idx])
+
+
+@pytest.mark.parametrize("packed", [False, True])
+def test_decoder_matches_palette_indexing_on_every_byte_pair(packed):
+    """Every table entry (all 65,536 pairs of stored bytes, odd length), also past the palette."""
+    rng = np.random.default_rng(7)
+    palette = rng.integers(256, size=(16 if packed else 256, 3), dtype=np.uint8)
+    pairs = rng.permutation(1 << 16).astype("<u2").view(np.uint8)
+    data = np.concatenate([pairs, rng.integers(256, size=5, dtype=np.uint8)])
+    idx = unpack4(data) if packed else data
+    for fast in (None, False):
+        dec = PaletteDecoder(palette, packed=packed, _fast=fast)
+        np.testing.assert_array_equal(dec.decode(data), palette[idx])
+        short = PaletteDecoder(palette[:3], packed=packed, _fast=fast).decode(data)
+        black = np.zeros(3, np.uint8)  # indices past the palette (a corrupt file)
+        np.testing.assert_array_equal(short, np.where((idx < 3)[..., None],
+                                                      palette[np.minimum(idx, 2)], black))
 
 
 def test_encoder_first_appearance_order():
@@ -186,3 +206,57 @@ def test_every_reader_decodes(maze):
         np.testing.assert_array_equal(first.numpy(), frames[obs_t[3]])
         np.testing.assert_array_equal(last.numpy(), frames[obs_t[3] + 1])
     ds.close()
+
+
+def test_maze_frames_decode_like_plain_h5py(tmp_path):
+    """Every read path of a generated maze file gives the plain ``palette[indices]`` frames."""
+    path = make_small("abco/maze3x3-pre-v0", tmp_path, episodes_per_layout=20, max_steps=10)
+    with h5py.File(path) as f:
+        assert f.attrs["observation_encoding"] == "palette4"
+        plain = f["observation_palette"][()][unpack4(f["observations"][()])]
+        n = len(plain)
+        assert n > 3 * IMAGE_CHUNK_ROWS and n % IMAGE_CHUNK_ROWS  # a short last chunk
+        reader = ObservationReader(f)
+        assert reader._raw_chunks  # whole chunks are inflated by the reader itself
+        np.testing.assert_array_equal(reader.read(), plain)
+        for start, stop in [(0, 64), (3, 200), (64, n), (70, 75), (n - 1, n), (5, 5)]:
+            np.testing.assert_array_equal(reader.read(start, stop), plain[start:stop])
+        rows = np.array([n - 1, 0, 0, 130, 64])
+        np.testing.assert_array_equal(reader.rows(rows), plain[rows])
+    ds = abco_data.open_dataset(path)
+    np.testing.assert_array_equal(ds.load_arrays().observations, plain)
+    np.testing.assert_array_equal(np.concatenate([e.observations for e in ds.episodes()]),
+                                  plain)
+    ds.close()
+
+
+def test_reader_leaves_unusual_chunks_to_hdf5(tmp_path):
+    rng = np.random.default_rng(5)
+    palette = rng.integers(256, size=(16, 3), dtype=np.uint8)
+    stored = rng.integers(256, size=(10, 3, 4), dtype=np.uint8)  # packed; chunks of 4 rows
+    with h5py.File(tmp_path / "a.h5", "w") as f:
+        f.attrs["observation_encoding"] = "palette4"
+        f["observation_palette"] = palette
+        ds = f.create_dataset("observations", data=stored, chunks=(4, 3, 4),
+                              compression="gzip", maxshape=(None, 3, 4))
+        ds.id.write_direct_chunk((4, 0, 0), stored[4:8].tobytes(), filter_mask=1)  # skipped
+        ds.resize(14, axis=0)  # chunk 3 never written: HDF5's fill value, zeros
+    expect = palette[unpack4(np.concatenate([stored, np.zeros((4, 3, 4), np.uint8)]))]
+    with h5py.File(tmp_path / "a.h5") as f:
+        reader = ObservationReader(f)
+        assert reader._raw_chunks
+        np.testing.assert_array_equal(reader.read(), expect)
+        np.testing.assert_array_equal(reader.read(2, 13), expect[2:13])
+    with h5py.File(tmp_path / "a.h5", "a") as f:
+        f["observations"].id.write_direct_chunk((8, 0, 0), b"not deflate data")
+    with h5py.File(tmp_path / "a.h5") as f, pytest.raises(OSError):
+        ObservationReader(f).read()  # HDF5's own error, as Dataset and verify expect
+    with h5py.File(tmp_path / "b.h5", "w") as f:
+        f.attrs["observation_encoding"] = "palette4"
+        f["observation_palette"] = palette
+        f.create_dataset("observations", data=stored, chunks=(4, 3, 4), compression="gzip",
+                         shuffle=True)
+    with h5py.File(tmp_path / "b.h5") as f:
+        reader = ObservationReader(f)
+        assert not reader._raw_chunks  # another filter pipeline: all through HDF5
+        np.testing.assert_array_equal(reader.read(), expect[:10])
