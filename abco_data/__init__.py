@@ -1,9 +1,10 @@
 """abco_data: the datasets of the ABCO paper as verified, deterministic HDF5 files.
 
-Fifteen datasets (expert states and random-policy pre-demonstrations for six environments, and
-the mazes' start-cell pre-demonstrations of the authors' regime), each one HDF5 file in the versioned format of ``docs/format.md``. :func:`load` gets one from
-the cache, the Hugging Face Hub, or local generation; :func:`open_dataset` reads a file;
-:func:`verify` checks every byte of one. ``import abco_data`` does not import torch.
+Fifteen datasets (expert states and random-policy pre-demonstrations for six environments,
+and the mazes' start-cell pre-demonstrations of the authors' regime), each one HDF5 file in
+the versioned format of ``docs/format.md``. :func:`load` gets one from the cache, the Hugging
+Face Hub, or local generation; :func:`open_dataset` reads a file; :func:`verify` checks every
+byte of one. ``import abco_data`` does not import torch.
 
 Example:
     >>> import abco_data

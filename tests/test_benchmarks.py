@@ -24,6 +24,7 @@ EXPECTED = {
                       "x jpeg", "write (collect + create)", "read every transition",
                       "sample 100 transitions", "jpeg_encoding=False",
                       "abco read back the recorded frames bit for bit: yes", "goals:"],
+    "bench_load.py": ["idle s", "loaded s", "ratio", "CartPole-v1"],
     "bench_train.py": ["env", "method", "result", "AbcoMaze3x3-v0     abco       P=",
                        "CartPole-v1        abco       P="],
 }
