@@ -7,7 +7,7 @@ Settings compared: torch threads (``--threads``) and deterministic kernels on or
 
 Usage::
 
-    python benchmarks/bench_load.py                      # 5x5 ABCO (the README's main job), CartPole
+    python benchmarks/bench_load.py        # 5x5 ABCO (the README main job) and CartPole
     python benchmarks/bench_load.py --envs CartPole-v1 --threads 1,2 --tiny
 
 Prints one row per (env, threads, deterministic): idle seconds, loaded seconds, loaded / idle.
