@@ -205,7 +205,8 @@ class Dataset:
                 positions=f[POSITIONS][o : o + n + 1] if maze else None,
             )
         check_values(_episode_arrays(episode, self.action_column),
-                     action_count=self.action_space.n, path=f"{self.path} (episode {i})")
+                     action_count=self.action_space.n, path=f"{self.path} (episode {i})",
+                     observation_space=self.observation_space)
         return episode
 
     def _read_obs(self, start: int, stop: int, out: np.ndarray | None = None) -> np.ndarray:
@@ -230,7 +231,8 @@ class Dataset:
                     for name, col in _ARRAY_COLUMNS.items()}
         obs = self._read_obs(0, len(reader), np.empty(reader.shape, dtype=reader.dtype))
         arrays = DatasetArrays(observations=obs, **cols)
-        check_values(arrays, action_count=self.action_space.n, path=self.path)
+        check_values(arrays, action_count=self.action_space.n, path=self.path,
+                     observation_space=self.observation_space)
         return arrays
 
     def transition_index(self) -> tuple[np.ndarray, np.ndarray]:

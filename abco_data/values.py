@@ -3,9 +3,10 @@
 :func:`check_values` runs on the arrays of a whole file (``Dataset.load_arrays``) and on those
 of one episode (``Dataset.episode``): finite rewards, returns and observations, actions in the
 action space, episodes that end on their last transition and only there, returns that are the
-sums of the rewards, and for mazes agent positions inside the grid, valid layouts and layout
-indices. :func:`abco_data.verify` adds what needs more than the arrays (observations inside the
-observation space, every maze frame re-rendered).
+sums of the rewards, observations inside the observation space, and for mazes agent positions
+inside the grid, valid layouts and layout indices. :func:`check_observations` is the part the
+torch view applies to each batch. :func:`abco_data.verify` adds what needs more than the
+arrays (every maze move against the walls, every frame re-rendered).
 
 Example:
     >>> import numpy as np
@@ -23,16 +24,17 @@ Example:
 from __future__ import annotations
 
 import os
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from gymnasium import spaces
 
 from abco_data.errors import CorruptDatasetError
 
 if TYPE_CHECKING:  # typing only: abco_data.dataset imports this module
     from abco_data.dataset import DatasetArrays
 
-__all__ = ["check_values", "MAZE_CELL_BITS"]
+__all__ = ["check_values", "check_observations", "MAZE_CELL_BITS"]
 
 #: A maze cell is a bit set of its open sides (N=1, E=2, S=4, W=8).
 MAZE_CELL_BITS = 15
@@ -70,19 +72,42 @@ def _check_maze(a: DatasetArrays, path: object) -> None:
         raise CorruptDatasetError(f"{path}: negative maze layout index")
 
 
-def check_values(a: DatasetArrays, *, action_count: int, path: str | os.PathLike[str]) -> None:
+def check_observations(observations: np.ndarray, space: spaces.Space[Any] | None,
+                       path: str | os.PathLike[str]) -> None:
+    """Observations are finite and inside ``space`` (a ``Box``; None: finite only).
+
+    Raises:
+        CorruptDatasetError: A value is NaN, infinite or outside the space.
+    """
+    _finite(observations, "observations", path)
+    if not isinstance(space, spaces.Box) or not observations.size:
+        return
+    if observations.dtype.kind in "ui":
+        limits = np.iinfo(observations.dtype)
+        if np.all(space.low <= limits.min) and np.all(space.high >= limits.max):
+            return  # every value of the dtype is inside (uint8 images)
+    # Per-feature extremes: no temporary as big as the observations.
+    if np.any(observations.min(axis=0) < space.low) \
+            or np.any(observations.max(axis=0) > space.high):
+        raise CorruptDatasetError(f"{path}: observations outside the observation space")
+
+
+def check_values(a: DatasetArrays, *, action_count: int, path: str | os.PathLike[str],
+                 observation_space: spaces.Space[Any] | None = None) -> None:
     """Check the value rules of the module docstring on the arrays of a file or an episode.
 
     Args:
         a: The arrays (an episode's: offsets relative to the episode).
         action_count: ``n`` of the ``Discrete(n)`` action space.
         path: The file, for messages.
+        observation_space: The space the observations must lie in, if known.
 
     Raises:
         CorruptDatasetError: A rule is broken; the message names the file and the rule.
     """
-    for name in ("rewards", "episode_returns", "observations"):
+    for name in ("rewards", "episode_returns"):
         _finite(getattr(a, name), name.replace("episode_", "episode "), path)
+    check_observations(a.observations, observation_space, path)
     for name in ("actions", "idm_eval_actions"):
         actions = getattr(a, name)
         if actions is not None and len(actions) and (
