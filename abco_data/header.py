@@ -127,17 +127,19 @@ def _check_identity(attrs: Mapping[str, Any], path: Path, dataset_id: str | None
 
 
 def _check_chunks(ds: h5py.Dataset, path: Path, file_size: int) -> None:
-    """Every chunk of a chunked column is stored, inside the file and past its start: HDF5
-    reads a chunk whose address a damaged index lost, or zeroed, as zeros without an error."""
+    """Every chunk of a chunked column is stored, where the writer put it: inside the file,
+    and at the logical position of each block of rows. HDF5 reads a chunk whose index entry
+    is lost, zeroed or moved as zeros, without an error."""
     if ds.chunks is None or not len(ds):
         return
-    expected = -(-len(ds) // ds.chunks[0])
-    stored: list[tuple[int, int]] = []
-    ds.id.chunk_iter(lambda info: stored.append((info.byte_offset, info.size)))
-    if len(stored) != expected or any(
-            offset <= 0 or size <= 0 or offset + size > file_size for offset, size in stored):
-        raise CorruptDatasetError(f"{path}: column {ds.name} has a damaged chunk index"
-                                  f" ({len(stored)} of {expected} chunks where they can be)")
+    rows = ds.chunks[0]
+    expected = [(i * rows,) + (0,) * (ds.ndim - 1) for i in range(-(-len(ds) // rows))]
+    stored: list[tuple[tuple[int, ...], int, int]] = []
+    ds.id.chunk_iter(lambda c: stored.append((c.chunk_offset, c.byte_offset, c.size)))
+    if sorted(offset for offset, _, _ in stored) != expected or any(
+            at <= 0 or size <= 0 or at + size > file_size for _, at, size in stored):
+        raise CorruptDatasetError(f"{path}: column {ds.name} has a damaged chunk index (its"
+                                  " chunks are not all where the writer put them)")
 
 
 def _check_counts(f: h5py.File, attrs: Mapping[str, Any], path: Path) -> None:
