@@ -3,8 +3,8 @@
 Fifteen datasets (expert states and random-policy pre-demonstrations for six environments,
 and the mazes' start-cell pre-demonstrations of the authors' regime), each one HDF5 file in
 the versioned format of ``docs/format.md``. :func:`load` gets one from the cache, the Hugging
-Face Hub, or local generation; :func:`open_dataset` reads a file; :func:`verify` checks every
-byte of one. ``import abco_data`` does not import torch.
+Face Hub, or local generation; :func:`open_dataset` reads a file; :func:`verify` and
+:func:`check_dataset` check every byte of one. ``import abco_data`` does not import torch.
 
 Example:
     >>> import abco_data
@@ -19,7 +19,9 @@ from abco_data.errors import (
     ChecksumError,
     CorruptDatasetError,
     DatasetError,
+    DatasetFileNotFoundError,
     DatasetNotAvailableError,
+    DatasetReadError,
     DatasetWriteError,
     FormatVersionError,
     UnknownDatasetError,
@@ -33,7 +35,7 @@ from abco_data.manifest import data_home
 from abco_data.publish import push
 from abco_data.reference import ReferenceReturns
 from abco_data.registry import DATASET_IDS, DatasetSpec, dataset_id, spec
-from abco_data.verify import VerifyReport, verify
+from abco_data.verify import VerifyReport, check_dataset, verify
 
 __version__ = "0.1.0"
 
@@ -44,7 +46,9 @@ __all__ = [
     "Dataset",
     "DatasetArrays",
     "DatasetError",
+    "DatasetFileNotFoundError",
     "DatasetNotAvailableError",
+    "DatasetReadError",
     "DatasetSpec",
     "DatasetWriteError",
     "Episode",
@@ -56,6 +60,7 @@ __all__ = [
     "UnknownDatasetError",
     "VerifyReport",
     "WrongKindError",
+    "check_dataset",
     "data_home",
     "dataset_id",
     "download",

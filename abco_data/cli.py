@@ -4,6 +4,11 @@
 abco_data`` runs them on their own through :func:`main`. Every action parser sets
 ``func`` (a callable ``func(args) -> int`` exit code) as its default.
 
+A dataset problem ends in one line ``error: ...`` on stderr, never a traceback: exit status 2
+for bad input (an unknown id, a bad ``--set``, a file that does not exist or is of another
+kind), 1 for an operation that failed (a corrupt file, a checksum mismatch, no source for a
+dataset, a full disk). Programming errors keep their traceback.
+
 Example:
     >>> main(["list"])  # doctest: +ELLIPSIS
     id ...
@@ -20,9 +25,26 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from abco_data.errors import DatasetError
+from abco_data.errors import (
+    DatasetError,
+    DatasetReadError,
+    UnknownDatasetError,
+    WrongKindError,
+)
 
-__all__ = ["add_subcommands", "main", "build_parser"]
+__all__ = ["add_subcommands", "main", "build_parser", "run", "EXIT_FAILED", "EXIT_BAD_INPUT",
+           "UsageError"]
+
+#: Exit status of an operation that failed (corrupt data, no source, a full disk).
+EXIT_FAILED = 1
+#: Exit status of bad input (as argparse's own usage errors).
+EXIT_BAD_INPUT = 2
+#: Default time limit of ``abco data verify`` (it runs in a child process).
+VERIFY_TIMEOUT = 600.0
+
+
+class UsageError(DatasetError):
+    """A command-line argument that cannot be used (exit status 2)."""
 
 
 def _manifest_entry(dataset_id: str) -> Any:
@@ -82,16 +104,25 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def _parse_overrides(items: Sequence[str]) -> dict[str, Any]:
+def _parse_overrides(dataset_id: str, items: Sequence[str], out_path: str | None
+                     ) -> dict[str, Any]:
+    from abco_data.registry import spec
+
     out = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep:
-            raise SystemExit(f"--set expects KEY=VALUE, got {item!r}")
+            raise UsageError(f"--set expects KEY=VALUE, got {item!r}")
         try:
             out[key] = json.loads(value)
         except json.JSONDecodeError:
             out[key] = value
+    try:
+        spec(dataset_id).with_overrides(**out)
+    except TypeError as err:  # with_overrides' own report of an unknown parameter
+        raise UsageError(str(err)) from err
+    if out and out_path is None:
+        raise UsageError("--set needs --out: the cache only holds the standard datasets")
     return out
 
 
@@ -99,8 +130,9 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     from abco_data.files import sha256_of
     from abco_data.generate import generate
 
+    overrides = _parse_overrides(args.id, args.set, args.out)
     start = time.perf_counter()
-    path = generate(args.id, args.out, progress=not args.quiet, **_parse_overrides(args.set))
+    path = generate(args.id, args.out, progress=not args.quiet, **overrides)
     seconds = time.perf_counter() - start
     print(f"{args.id}: wrote {path} ({path.stat().st_size} bytes, sha256 {sha256_of(path)})"
           f" in {seconds:.1f} s")
@@ -117,20 +149,11 @@ def _cmd_download(args: argparse.Namespace) -> int:
 
 
 def _cmd_verify(args: argparse.Namespace) -> int:
-    from abco_data.dataset import open_dataset
     from abco_data.verify import verify
 
-    path = Path(args.path)
-    sha256, size, source = args.sha256, None, "--sha256"
-    if sha256 is None:
-        ds = open_dataset(path)
-        overridden = json.loads(ds.attrs.get("overrides", "[]"))
-        entry = None if overridden else _manifest_entry(ds.id)
-        ds.close()
-        if entry is not None:
-            sha256, size, source = entry.sha256, entry.size, "the manifest"
-    report = verify(path, sha256=sha256, size=size)
-    checked = f"; size and sha256 match {source}" if sha256 else ""
+    report = verify(args.source, sha256=args.sha256, timeout=args.timeout)
+    checked = f"; size and sha256 match {report.checksum}" if report.checksum else \
+        "; no checksum is known for this dataset id"
     print(f"OK {report.path}: {report.dataset_id}, {report.num_episodes} episodes,"
           f" {report.num_transitions} transitions, {report.size} bytes, sha256"
           f" {report.sha256}{checked}"
@@ -167,9 +190,13 @@ def _add_actions(sub: Any) -> None:
     p.add_argument("--revision")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_cmd_download)
-    p = sub.add_parser("verify", help="read and check every value of a dataset file")
-    p.add_argument("path")
-    p.add_argument("--sha256", help="expected sha256 (default: the manifest's, if listed)")
+    p = sub.add_parser("verify", help="check the bytes and every value of a dataset file")
+    p.add_argument("source", metavar="PATH_OR_ID",
+                   help="a dataset file, or a dataset id (the cache's copy)")
+    p.add_argument("--sha256", help="expected sha256 (default: the manifest's for a published"
+                   " file, the generator's bytes for a variant)")
+    p.add_argument("--timeout", type=float, default=VERIFY_TIMEOUT,
+                   help=f"give up after this many seconds (default {VERIFY_TIMEOUT:g})")
     p.set_defaults(func=_cmd_verify)
     p = sub.add_parser("push", help="upload a dataset and its card to a Hub dataset repo")
     p.add_argument("id")
@@ -195,12 +222,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run a parsed action; dataset errors print one line and give exit code 1."""
+    """Run a parsed action; a dataset error prints one line ``error: ...`` and gives exit
+    status :data:`EXIT_BAD_INPUT` or :data:`EXIT_FAILED` (see the module docstring)."""
     try:
         return int(args.func(args))
-    except (DatasetError, FileNotFoundError, TypeError, ValueError) as err:
+    except (UsageError, UnknownDatasetError, WrongKindError, DatasetReadError) as err:
         print(f"error: {err}", file=sys.stderr)
-        return 1
+        return EXIT_BAD_INPUT
+    except DatasetError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return EXIT_FAILED
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
 
 
 def main(argv: Sequence[str] | None = None) -> int:

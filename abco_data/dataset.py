@@ -23,21 +23,19 @@ from abco_data.format import (
     EPISODE_COLUMNS,
     IDM_EVAL_ACTIONS,
     POSITIONS,
-    REFERENCE_COLUMNS,
     REWARDS,
     TERMINATIONS,
     TRUNCATIONS,
     LazyH5File,
     ObservationReader,
     action_column,
-    check_header,
     episode_column,
-    expected_rows,
+    hdf5_errors,
     open_h5,
-    read_column,
-    space_from_json,
 )
+from abco_data.header import read_header, read_whole_column
 from abco_data.reference import ReferenceReturns
+from abco_data.values import check_values
 
 __all__ = ["Dataset", "Episode", "DatasetArrays", "open_dataset"]
 
@@ -109,18 +107,6 @@ _ARRAY_COLUMNS = {
 }
 
 
-def _read(ds: h5py.Dataset, path: Path) -> np.ndarray:
-    """Read a whole column into one fresh array (a single allocation)."""
-    out = np.empty(ds.shape, dtype=ds.dtype)
-    try:
-        if out.size:
-            read_column(ds, out)
-    except OSError as err:
-        raise CorruptDatasetError(f"{path}: column {ds.name} cannot be read (corrupt or"
-                                  f" truncated data): {err}") from err
-    return out
-
-
 @dataclass(frozen=True, eq=False)
 class Dataset:
     """An opened abco dataset file (see :func:`open_dataset`).
@@ -187,8 +173,10 @@ class Dataset:
     def _episode_index(self) -> dict[str, np.ndarray]:
         if not self._index:
             f = self._file()
-            for key in EPISODE_COLUMNS:
-                self._index[key] = _read(f[episode_column(key)], self.path)
+            with hdf5_errors(self.path, "episode offsets"):
+                index = {key: read_whole_column(f[episode_column(key)], self.path)
+                         for key in EPISODE_COLUMNS}
+            self._index.update(index)
         return self._index
 
     # -- episodes -----------------------------------------------------------------------------
@@ -206,22 +194,23 @@ class Dataset:
         idx, f = self._episode_index(), self._file()
         o, t, n = (int(idx[k][i]) for k in ("obs_offset", "transition_offset", "length"))
         maze = POSITIONS in f
-        return Episode(
-            index=i, seed=int(idx["seed"][i]), observations=self._read_obs(o, o + n + 1),
-            actions=f[ACTIONS][t : t + n] if self.action_column == ACTIONS else None,
-            rewards=f[REWARDS][t : t + n], terminations=f[TERMINATIONS][t : t + n],
-            truncations=f[TRUNCATIONS][t : t + n], episode_return=float(idx["return"][i]),
-            layout=f[episode_column("layout")][i] if maze else None,
-            layout_index=int(f[episode_column("layout_index")][i]) if maze else None,
-            positions=f[POSITIONS][o : o + n + 1] if maze else None,
-        )
+        with hdf5_errors(self.path, f"episode {i}"):
+            episode = Episode(
+                index=i, seed=int(idx["seed"][i]), observations=self._read_obs(o, o + n + 1),
+                actions=f[ACTIONS][t : t + n] if self.action_column == ACTIONS else None,
+                rewards=f[REWARDS][t : t + n], terminations=f[TERMINATIONS][t : t + n],
+                truncations=f[TRUNCATIONS][t : t + n], episode_return=float(idx["return"][i]),
+                layout=f[episode_column("layout")][i] if maze else None,
+                layout_index=int(f[episode_column("layout_index")][i]) if maze else None,
+                positions=f[POSITIONS][o : o + n + 1] if maze else None,
+            )
+        check_values(_episode_arrays(episode, self.action_column),
+                     action_count=self.action_space.n, path=f"{self.path} (episode {i})",
+                     observation_space=self.observation_space)
+        return episode
 
     def _read_obs(self, start: int, stop: int, out: np.ndarray | None = None) -> np.ndarray:
-        try:
-            return self._observations().read(start, stop, out)
-        except OSError as err:
-            raise CorruptDatasetError(f"{self.path}: observations cannot be read (corrupt or"
-                                      f" truncated data): {err}") from err
+        return self._observations().read(start, stop, out)
 
     def episodes(self) -> Iterator[Episode]:
         """Every episode, in order."""
@@ -237,10 +226,14 @@ class Dataset:
         """
         f = self._file()
         reader = self._observations()
-        cols = {name: (_read(f[col], self.path) if col in f else None)
-                for name, col in _ARRAY_COLUMNS.items()}
+        with hdf5_errors(self.path, "columns"):
+            cols = {name: (read_whole_column(f[col], self.path) if col in f else None)
+                    for name, col in _ARRAY_COLUMNS.items()}
         obs = self._read_obs(0, len(reader), np.empty(reader.shape, dtype=reader.dtype))
-        return DatasetArrays(observations=obs, **cols)
+        arrays = DatasetArrays(observations=obs, **cols)
+        check_values(arrays, action_count=self.action_space.n, path=self.path,
+                     observation_space=self.observation_space)
+        return arrays
 
     def transition_index(self) -> tuple[np.ndarray, np.ndarray]:
         """``(obs_t, obs_t1)``: rows of ``observations`` of each transition's ``s`` and ``s'``.
@@ -265,13 +258,10 @@ class Dataset:
                              f" {self.num_transitions} transitions")
         obs_t, _ = self.transition_index()
         rows = obs_t[items]
-        try:
-            block = self._observations().rows(np.concatenate([rows, rows + 1]))
-        except OSError as err:
-            raise CorruptDatasetError(f"{self.path}: observations cannot be read: {err}") from err
+        block = self._observations().rows(np.concatenate([rows, rows + 1]))
         actions = None
         if self.action_column == ACTIONS:
-            actions = self._file()[ACTIONS][()][items] if items.size else items
+            actions = self.actions_of_transitions()[items]
         return block[: len(rows)], actions, block[len(rows) :]
 
     def actions_of_transitions(self, *, idm_eval: bool = False) -> np.ndarray:
@@ -288,7 +278,12 @@ class Dataset:
             raise WrongKindError(
                 f"{self.path}: expert data has no training actions; its idm_eval_actions are"
                 " for measuring IDM accuracy only (pass idm_eval=True to read them)")
-        return _read(self._file()[self.action_column], self.path)
+        with hdf5_errors(self.path, f"column {self.action_column}"):
+            actions = read_whole_column(self._file()[self.action_column], self.path)
+        if len(actions) and (actions.min() < 0 or actions.max() >= self.action_space.n):
+            raise CorruptDatasetError(f"{self.path}: {self.action_column} outside the action"
+                                      f" space {self.action_space}")
+        return actions
 
     def sample_by_action(self, counts: Sequence[int] | Mapping[int, int] | np.ndarray,
                          rng: np.random.Generator | int | None) -> np.ndarray:
@@ -327,39 +322,26 @@ class Dataset:
         return TransitionDataset(self, in_memory=in_memory, **kwargs)
 
 
-def _reference(f: h5py.File, attrs: Mapping[str, Any]) -> ReferenceReturns:
-    expert_mean = float(attrs["reference_expert_mean"])
-    random_mean = float(attrs["reference_random_mean"])
-    if REFERENCE_COLUMNS[0] not in f:
-        return ReferenceReturns(expert_mean, random_mean)
-    ids, splits, expert, random = (f[c][()] for c in REFERENCE_COLUMNS)
-    return ReferenceReturns(expert_mean, random_mean, tuple(s.decode() for s in ids),
-                            tuple(s.decode() for s in splits), expert, random)
-
-
-def _check_counts(f: h5py.File, attrs: Mapping[str, Any], path: Path) -> None:
-    n_ep, n_tr = attrs["num_episodes"], attrs["num_transitions"]
-    for col, n in expected_rows(attrs["kind"], n_ep, n_tr, maze=POSITIONS in f).items():
-        if col not in f:
-            raise CorruptDatasetError(f"{path}: missing column {col}")
-        if f[col].shape[0] != n:
-            raise CorruptDatasetError(f"{path}: column {col} has {f[col].shape[0]} rows,"
-                                      f" expected {n} from the root attributes")
-    lengths = _read(f[episode_column("length")], path)
-    starts = _read(f[episode_column("transition_offset")], path)
-    obs_starts = _read(f[episode_column("obs_offset")], path)
-    cum = np.concatenate([[0], np.cumsum(lengths)[:-1]]) if n_ep else lengths
-    if (lengths.sum() != n_tr or np.any(lengths < 1) or np.any(starts != cum)
-            or np.any(obs_starts != starts + np.arange(n_ep))):
-        raise CorruptDatasetError(f"{path}: episode offsets and lengths are inconsistent")
+def _episode_arrays(ep: Episode, action_column: str) -> DatasetArrays:
+    """The arrays of one episode, offsets relative to it (for :func:`check_values`)."""
+    first = np.zeros(1, dtype=np.int64)
+    return DatasetArrays(
+        observations=ep.observations, actions=ep.actions, idm_eval_actions=None,
+        rewards=ep.rewards, terminations=ep.terminations, truncations=ep.truncations,
+        episode_starts=first, episode_transition_starts=first,
+        episode_lengths=np.array([ep.length]), episode_seeds=np.array([ep.seed]),
+        episode_returns=np.array([ep.episode_return]), positions=ep.positions,
+        layouts=None if ep.layout is None else ep.layout[None],
+        layout_indices=None if ep.layout_index is None else np.array([ep.layout_index]))
 
 
 def open_dataset(path: str | os.PathLike[str], *, dataset_id: str | None = None,
                  kind: str | None = None) -> Dataset:
     """Open and validate an abco dataset file.
 
-    Checks the format name and version, the required attributes and columns, and that the
-    episode offsets agree with the column lengths (reading every value is left to
+    Checks the format name and version, the required attributes and columns, that the id
+    agrees with the env and kind, and that the episode offsets agree with the column lengths
+    (reading every value, and the checksum, is left to :func:`abco_data.check_dataset` and
     :func:`abco_data.verify`).
 
     Args:
@@ -368,34 +350,18 @@ def open_dataset(path: str | os.PathLike[str], *, dataset_id: str | None = None,
         kind: If given, the kind the file must be (``expert`` | ``pre_demonstrations``).
 
     Raises:
-        FileNotFoundError: No such file.
+        DatasetFileNotFoundError: No such file (also a ``FileNotFoundError``).
+        DatasetReadError: Not a regular file, or not readable.
         CorruptDatasetError: Truncated, corrupt, not an abco dataset, or inconsistent.
         FormatVersionError: Another ``format_version``.
         WrongKindError: Another id or kind than asked for.
     """
     path = Path(path)
-    with open_h5(path) as f:
-        try:
-            attrs = check_header(f, path)
-            if kind is not None and attrs["kind"] != kind:
-                raise WrongKindError(f"{path}: holds {attrs['kind']} data"
-                                     f" ({attrs['dataset_id']}), not {kind}")
-            if dataset_id is not None and attrs["dataset_id"] != dataset_id:
-                raise WrongKindError(f"{path}: holds dataset {attrs['dataset_id']!r},"
-                                     f" not {dataset_id!r}")
-            _check_counts(f, attrs, path)
-            reference = _reference(f, attrs)
-            obs_space = space_from_json(attrs["observation_space"])
-            obs_shape = ObservationReader(f).shape[1:]
-            if obs_shape != obs_space.shape:
-                raise CorruptDatasetError(f"{path}: observations have shape {obs_shape},"
-                                          f" the observation space {obs_space.shape}")
-            act_space = space_from_json(attrs["action_space"])
-        except (KeyError, ValueError, TypeError, OSError) as err:
-            if isinstance(err, (CorruptDatasetError, WrongKindError)):
-                raise
-            raise CorruptDatasetError(f"{path}: unreadable dataset metadata: {err}") from err
+    with open_h5(path) as f, hdf5_errors(path, "dataset metadata"):
+        header = read_header(f, path, dataset_id=dataset_id, kind=kind)
+    attrs = header.attrs
     return Dataset(
         path=path, id=attrs["dataset_id"], kind=attrs["kind"], env_id=attrs["env_id"],
-        num_episodes=int(attrs["num_episodes"]), num_transitions=int(attrs["num_transitions"]),
-        attrs=attrs, observation_space=obs_space, action_space=act_space, reference=reference)
+        num_episodes=attrs["num_episodes"], num_transitions=attrs["num_transitions"],
+        attrs=attrs, observation_space=header.observation_space,
+        action_space=header.action_space, reference=header.reference)

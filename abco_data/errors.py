@@ -11,6 +11,8 @@ __all__ = [
     "ChecksumError",
     "DatasetNotAvailableError",
     "DatasetWriteError",
+    "DatasetReadError",
+    "DatasetFileNotFoundError",
 ]
 
 
@@ -47,3 +49,11 @@ class DatasetNotAvailableError(DatasetError):
 
 class DatasetWriteError(DatasetError, OSError):
     """Writing a dataset failed (a full disk, say); the target was left as it was."""
+
+
+class DatasetReadError(DatasetError, OSError):
+    """A file that cannot be read at all (no permission, a folder, a broken link...)."""
+
+
+class DatasetFileNotFoundError(DatasetReadError, FileNotFoundError):
+    """No file at the path given."""

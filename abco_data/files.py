@@ -3,8 +3,10 @@
 Everything abco_data writes (dataset files, cache copies, Minari exports) is first written
 under a hidden temporary name next to its target, then moved onto the target with
 :func:`os.replace`, which is atomic on one file system: a reader sees the old file or the new
-one, never half of one. Temporary names end in :data:`TEMP_SUFFIX`, so they can be told
-apart from anything else in a folder.
+one, never half of one. Temporary names end in :data:`TEMP_SUFFIX` and carry the id of the
+process writing them, so the ones a killed process left behind can be told apart from
+anything else in a folder and removed (:func:`remove_stale_temporaries`, run by
+:func:`atomic_target` for its own target and by the cache for its whole folder).
 
 Example:
     >>> import tempfile
@@ -20,19 +22,31 @@ Example:
 from __future__ import annotations
 
 import hashlib
+import logging
 import os
+import re
 import shutil
+import time
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["TEMP_SUFFIX", "atomic_target", "file_digest", "remove_path", "sha256_of",
-           "temporary_name"]
+__all__ = ["TEMP_SUFFIX", "STALE_AFTER_SECONDS", "atomic_target", "file_digest",
+           "remove_path", "remove_stale_temporaries", "sha256_of", "temporary_name"]
+
+logger = logging.getLogger(__name__)
 
 #: The suffix of every temporary name abco_data creates.
 TEMP_SUFFIX = ".abco-tmp"
+#: A temporary file this old is stale even if its process id is in use again.
+STALE_AFTER_SECONDS = 24 * 3600
 _READ_CHUNK = 1 << 20
+# ".<target>.<pid>-<hex>.<tag>.abco-tmp"; and the names of abco_data before 0.1.1 (no pid,
+# stale after STALE_AFTER_SECONDS): ".<target>.<32 hex>.tmp", ".<stem>.<12 hex>.<tag><suffix>"
+_TEMP = re.compile(r"^\.(?P<target>.+)\.(?P<pid>\d+)-[0-9a-f]{8}\.[a-z]+" + re.escape(TEMP_SUFFIX)
+                   + "$")
+_OLD_TEMP = re.compile(r"^\..+\.([0-9a-f]{32}\.tmp|[0-9a-f]{12}\.(incoming|generating)\..+)$")
 
 
 def temporary_name(target: str | os.PathLike[str], tag: str = "writing") -> Path:
@@ -40,20 +54,78 @@ def temporary_name(target: str | os.PathLike[str], tag: str = "writing") -> Path
 
     Example:
         >>> name = temporary_name("/data/x.hdf5", "incoming").name
-        >>> name.startswith(".x.hdf5.") and name.endswith(".incoming" + TEMP_SUFFIX)
+        >>> name.startswith(f".x.hdf5.{os.getpid()}-") and name.endswith(".incoming.abco-tmp")
         True
     """
     target = Path(target)
-    return target.with_name(f".{target.name}.{uuid.uuid4().hex[:12]}.{tag}{TEMP_SUFFIX}")
+    return target.with_name(
+        f".{target.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.{tag}{TEMP_SUFFIX}")
 
 
 def remove_path(path: Path) -> None:
-    """Remove a file, a link or a folder tree at ``path`` if there is one (never following a
-    link: a link is removed, not what it points to)."""
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path, ignore_errors=True)
-    else:
-        path.unlink(missing_ok=True)
+    """Remove a file, a link or a folder tree at ``path`` if there is one, as far as possible.
+
+    Never follows a link (a link is removed, not what it points to) and never raises: it
+    cleans up after another error, which must not be masked (a failure is logged).
+    """
+    try:
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            path.unlink(missing_ok=True)
+    except OSError as err:
+        logger.warning("could not remove %s: %s", path, err)
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process (EPERM): alive
+        return True
+    return True
+
+
+def remove_stale_temporaries(folder: str | os.PathLike[str], target: str | None = None,
+                             *, now: float | None = None) -> list[Path]:
+    """Remove the temporaries abco_data left in ``folder`` from processes that died.
+
+    A temporary is stale when the process that made it is gone (same machine), or when it is
+    older than :data:`STALE_AFTER_SECONDS`. Nothing else is touched; failures are logged.
+
+    Args:
+        folder: The folder to clean.
+        target: Only the temporaries of this file name.
+        now: The current time (tests).
+
+    Returns:
+        The paths removed.
+    """
+    now = time.time() if now is None else now
+    removed = []
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return removed
+    for name in names:
+        match = _TEMP.match(name)
+        if match is None and _OLD_TEMP.match(name) is None:
+            continue
+        if target is not None and (match is None or match["target"] != target):
+            continue
+        path = Path(folder) / name
+        try:
+            age = now - path.lstat().st_mtime
+        except OSError:
+            continue
+        dead = match is not None and not _process_alive(int(match["pid"]))
+        if dead or age > STALE_AFTER_SECONDS:
+            remove_path(path)
+            removed.append(path)
+    if removed:
+        logger.info("removed %d stale temporary file(s) from %s", len(removed), folder)
+    return removed
 
 
 def _fsync(path: Path) -> None:
@@ -76,6 +148,7 @@ def atomic_target(target: str | os.PathLike[str], tag: str = "writing") -> Itera
     """
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(target.parent, target.name)
     tmp = temporary_name(target, tag)
     try:
         yield tmp

@@ -4,13 +4,21 @@
 
 1. the abco cache (``$ABCO_DATA_HOME`` or ``~/.cache/abco/datasets``): a file found there is
    checked (size and sha256) against the manifest shipped in the package; one that fails is
-   reported in a log warning naming the file and both digests, and replaced, never used;
+   reported in a log warning naming the file and both digests, and replaced, never used. An
+   id the manifest does not list has nothing to check a cached copy against: it is generated
+   afresh (step 3) every time;
 2. the Hugging Face Hub: the file is fetched with :func:`huggingface_hub.hf_hub_download` from the
    dataset repo at the revision the manifest pins (through the huggingface_hub cache, so an
    interrupted download resumes), checked against the manifest, and moved into the abco cache
-   atomically;
+   atomically (where the abco cache is full or read-only, the checked copy in the
+   huggingface_hub cache is used in place; a bad copy there is removed, but never a file a
+   link of that cache points to outside it);
 3. local generation with :func:`abco_data.generate`, whose bytes equal the published ones, so the
    same manifest entry checks them.
+
+Temporary files that killed runs left in the cache are removed on the next call. A cache
+folder that cannot be written ends in a :class:`~abco_data.errors.DatasetWriteError` naming
+it.
 
 Offline (``offline=True``, or huggingface_hub's offline mode: ``HF_HUB_OFFLINE=1``) no request
 is sent: a copy already in the huggingface_hub cache is still used, and otherwise the dataset is
@@ -32,6 +40,7 @@ Example:
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 from pathlib import Path
@@ -41,10 +50,11 @@ from huggingface_hub.errors import EntryNotFoundError, HfHubHTTPError, OfflineMo
 from huggingface_hub.utils import httpx, silent_tqdm
 
 from abco_data.dataset import Dataset, open_dataset
-from abco_data.errors import ChecksumError, DatasetNotAvailableError
-from abco_data.files import atomic_target, file_digest
+from abco_data.errors import ChecksumError, DatasetNotAvailableError, DatasetWriteError
+from abco_data.files import atomic_target, file_digest, remove_path, remove_stale_temporaries
 from abco_data.generate import generate
 from abco_data.manifest import (
+    CACHE_ENV,
     DEFAULT_REPO_ID,
     Manifest,
     ManifestEntry,
@@ -135,13 +145,16 @@ def _hub_file(
 
 
 def _evict_hub_copy(path: Path) -> None:
-    """Remove a bad file from the huggingface_hub cache (its snapshot link and its blob)."""
-    blob = Path(os.path.realpath(path))
-    for item in {path, blob}:
-        try:
-            item.unlink(missing_ok=True)
-        except OSError as err:  # pragma: no cover - read-only caches
-            logger.warning("could not remove %s from the huggingface_hub cache: %s", item, err)
+    """Remove a bad file from the huggingface_hub cache: its snapshot link, and the blob the
+    link points to when that blob is in the huggingface_hub cache (never a file elsewhere)."""
+    cache = Path(constants.HF_HUB_CACHE).resolve()
+    link, blob = Path(os.path.abspath(path)), Path(os.path.realpath(path))
+    for item in (link, blob):
+        if item.is_relative_to(cache):
+            remove_path(item)
+        else:
+            logger.warning("not removing %s: it is outside the huggingface_hub cache %s",
+                           item, cache)
 
 
 def _in_hub_cache(entry: ManifestEntry, manifest: Manifest, rev: str) -> bool:
@@ -155,16 +168,30 @@ def _in_hub_cache(entry: ManifestEntry, manifest: Manifest, rev: str) -> bool:
     return isinstance(found, str)
 
 
-def _download_into(
-    dataset_id: str,
-    entry: ManifestEntry,
-    manifest: Manifest,
-    target: Path,
-    *,
-    revision: str | None,
-    progress: bool,
-    offline: bool,
-) -> Path:
+def _cache_error(err: OSError, target: Path) -> DatasetWriteError:
+    return DatasetWriteError(
+        err.errno or errno.EIO, f"cannot write {target.name} into the dataset cache"
+        f" {target.parent}: {err.strerror or err} (set {CACHE_ENV} to a writable folder)",
+        str(target.parent))
+
+
+def _install_or_use(hub_path: Path, target: Path, entry: ManifestEntry,
+                    dataset_id: str) -> Path:
+    """The verified Hub copy installed at ``target``; where the abco cache cannot take it
+    (full, read-only), the verified copy in the huggingface_hub cache itself."""
+    try:
+        return install_verified(hub_path, target, entry, dataset_id, "downloaded file")
+    except ChecksumError:
+        raise
+    except OSError as err:
+        verify_file(hub_path, entry, dataset_id=dataset_id, what="downloaded file")
+        logger.warning("%s; using the verified copy in the huggingface_hub cache, %s",
+                       _cache_error(err, target), hub_path)
+        return hub_path
+
+
+def _download_into(dataset_id: str, entry: ManifestEntry, manifest: Manifest, target: Path, *,
+                   revision: str | None, progress: bool, offline: bool) -> Path:
     """Hub (or huggingface_hub cache) -> verified -> ``target``, atomically."""
     rev = revision or manifest.revision
     had_copy = bool(rev) and _in_hub_cache(entry, manifest, rev or "")
@@ -172,49 +199,55 @@ def _download_into(
         dataset_id, entry, manifest, revision=revision, progress=progress, local_files_only=offline
     )
     try:
-        return install_verified(hub_path, target, entry, dataset_id, "downloaded file")
+        return _install_or_use(hub_path, target, entry, dataset_id)
     except ChecksumError as err:
         logger.warning("%s; removing it from the huggingface_hub cache", err)
         _evict_hub_copy(hub_path)
         if offline or not had_copy:
             raise
     # The bad copy was an old one from the huggingface_hub cache: fetch it again, once.
-    hub_path = _hub_file(
-        dataset_id,
-        entry,
-        manifest,
-        revision=revision,
-        progress=progress,
-        local_files_only=False,
-        force_download=True,
-    )
+    hub_path = _hub_file(dataset_id, entry, manifest, revision=revision, progress=progress,
+                         local_files_only=False, force_download=True)
     try:
-        return install_verified(hub_path, target, entry, dataset_id, "downloaded file")
+        return _install_or_use(hub_path, target, entry, dataset_id)
     except ChecksumError:
         _evict_hub_copy(hub_path)
         raise
 
 
-def _generate_into(
-    dataset_id: str, entry: ManifestEntry | None, target: Path, *, progress: bool
-) -> Path:
-    """Generate ``dataset_id`` locally, verify it, and move it to ``target``."""
-    with atomic_target(target, "generating") as tmp:
-        generate(dataset_id, tmp, progress=progress)
-        if entry is None:
-            size, sha256 = file_digest(tmp)
-            logger.warning(
-                "the manifest has no entry for %s: accepting the locally generated file "
-                "unverified (%d bytes, sha256 %s)",
-                dataset_id,
-                size,
-                sha256,
-            )
-        else:
-            verify_file(
-                tmp, entry, dataset_id=dataset_id, what="locally generated file", shown_as=target
-            )
+def _generate_into(dataset_id: str, entry: ManifestEntry | None, target: Path, *,
+                   progress: bool) -> Path:
+    """Generate ``dataset_id`` locally, check it against ``entry``, and move it to ``target``.
+
+    Without an entry the file just generated is the reference (generation is deterministic):
+    it replaces whatever the cache held, which is never used unchecked.
+    """
+    try:
+        with atomic_target(target, "generating") as tmp:
+            generate(dataset_id, tmp, progress=progress)
+            if entry is not None:
+                verify_file(tmp, entry, dataset_id=dataset_id, what="locally generated file",
+                            shown_as=target)
+    except DatasetWriteError:
+        raise
+    except OSError as err:
+        raise _cache_error(err, target) from err
     logger.info("generated %s into %s", dataset_id, target)
+    return target
+
+
+def _cached_copy(target: Path, entry: ManifestEntry, dataset_id: str) -> Path | None:
+    """``target`` if the cache holds a good copy there; None (logged) if not."""
+    if not target.exists():
+        return None
+    try:
+        verify_file(target, entry, dataset_id=dataset_id, what="cached file")
+    except ChecksumError as err:
+        logger.warning("%s; it will be replaced", err)
+        return None
+    except OSError as err:
+        logger.warning("cannot read the cached file %s (%s); it will be replaced", target, err)
+        return None
     return target
 
 
@@ -232,30 +265,24 @@ def fetch(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
         UnknownDatasetError: Unknown id.
         ChecksumError: The locally generated file differs from the manifest entry.
         DatasetNotAvailableError: No source could provide the dataset.
+        DatasetWriteError: The cache cannot be written (full, read-only, not a folder).
     """
     man = as_manifest(manifest)
     target = cached_path(dataset_id, cache_dir, manifest=man)
     entry = man.entry(dataset_id)
+    remove_stale_temporaries(target.parent)  # left by killed downloads and generations
+    if entry is None:
+        logger.info("the manifest has no entry for %s, so nothing to check a cached copy"
+                    " against: generating it", dataset_id)
+        return _generate_into(dataset_id, None, target, progress=progress)
+    if _cached_copy(target, entry, dataset_id) is not None:
+        return target
 
-    if target.exists():
-        if entry is None:
-            logger.info("using %s (no manifest entry for %s to check it)", target, dataset_id)
-            return target
-        try:
-            verify_file(target, entry, dataset_id=dataset_id, what="cached file")
-            return target
-        except ChecksumError as err:
-            logger.warning("%s; it will be replaced", err)
-
-    offline_now = _is_offline(offline)
-    if entry is not None:
-        try:
-            return _download_into(dataset_id, entry, man, target, revision=revision,
-                                  progress=progress, offline=offline_now)
-        except (DatasetNotAvailableError, ChecksumError) as err:
-            logger.warning("%s; generating %s locally instead", err, dataset_id)
-    elif not offline_now:
-        logger.info("%s is not in the manifest, so not on the Hub: generating it", dataset_id)
+    try:
+        return _download_into(dataset_id, entry, man, target, revision=revision,
+                              progress=progress, offline=_is_offline(offline))
+    except (DatasetNotAvailableError, ChecksumError) as err:
+        logger.warning("%s; generating %s locally instead", err, dataset_id)
     return _generate_into(dataset_id, entry, target, progress=progress)
 
 

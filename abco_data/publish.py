@@ -6,12 +6,14 @@ import json
 import logging
 import os
 import re
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 from huggingface_hub import CommitOperationAdd, HfApi, hf_hub_download
 
-from abco_data.errors import DatasetNotAvailableError
+from abco_data.errors import DatasetError, DatasetNotAvailableError
 from abco_data.files import file_digest
 from abco_data.format import attr_value, open_h5
 from abco_data.hub import HUB_ERRORS
@@ -30,6 +32,16 @@ logger = logging.getLogger(__name__)
 #: License written into the dataset card.
 CARD_LICENSE = "mit"
 _HEX40 = re.compile(r"[0-9a-f]{40}")
+
+
+@contextmanager
+def _hub_errors(what: str) -> Iterator[None]:
+    """The Hub refusing or failing a request becomes one clear line."""
+    try:
+        yield
+    except HUB_ERRORS as err:
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise DatasetError(f"{what}: {first}") from err
 
 
 def _root_attributes(path: Path) -> dict[str, Any]:
@@ -166,6 +178,7 @@ def push(dataset_id: str, repo_id: str, *, path: str | os.PathLike[str] | None =
         UnknownDatasetError: Unknown id.
         DatasetNotAvailableError: No file at ``path`` (or in the cache).
         ChecksumError: The file differs from the manifest's entry for the id.
+        DatasetError: The Hub refused or failed a request (the message says which).
     """
     man = as_manifest(manifest)
     cached = cached_path(dataset_id, manifest=man)
@@ -181,7 +194,8 @@ def push(dataset_id: str, repo_id: str, *, path: str | os.PathLike[str] | None =
 
     api = HfApi(token=token)  # huggingface_hub's own endpoint (HF_ENDPOINT)
     if create_repo:
-        api.create_repo(repo_id, repo_type="dataset", exist_ok=True, token=token)
+        with _hub_errors(f"could not create the dataset repo {repo_id}"):
+            api.create_repo(repo_id, repo_type="dataset", exist_ok=True, token=token)
     previous = None
     try:
         readme = hf_hub_download(
@@ -201,15 +215,16 @@ def push(dataset_id: str, repo_id: str, *, path: str | os.PathLike[str] | None =
         CommitOperationAdd(path_in_repo="README.md", path_or_fileobj=card.encode("utf-8")),
     ]
     size, sha256 = file_digest(file_path)
-    info = api.create_commit(
-        repo_id,
-        operations,
-        commit_message=f"Add {dataset_id} ({filename}, sha256 {sha256[:12]})",
-        commit_description=f"{filename}: {size} bytes, sha256 {sha256}",
-        repo_type="dataset",
-        revision=revision,
-        token=token,
-    )
+    with _hub_errors(f"could not push {dataset_id} to {repo_id}"):
+        info = api.create_commit(
+            repo_id,
+            operations,
+            commit_message=f"Add {dataset_id} ({filename}, sha256 {sha256[:12]})",
+            commit_description=f"{filename}: {size} bytes, sha256 {sha256}",
+            repo_type="dataset",
+            revision=revision,
+            token=token,
+        )
     commit = str(info.oid)
     if not _HEX40.fullmatch(commit):
         logger.warning("the Hub returned an unexpected commit id %r", commit)

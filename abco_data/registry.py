@@ -22,7 +22,8 @@ from typing import Any
 import abco_envs
 from abco_data.errors import UnknownDatasetError
 
-__all__ = ["DatasetSpec", "DATASET_IDS", "ENV_NAMES", "dataset_id", "spec", "is_maze"]
+__all__ = ["DatasetSpec", "DATASET_IDS", "ENV_NAMES", "ACTION_COUNTS", "dataset_id", "spec",
+           "is_maze"]
 
 #: Short dataset name of each environment id.
 ENV_NAMES = {
@@ -33,6 +34,9 @@ ENV_NAMES = {
     "Acrobot-v1": "acrobot",
     "MountainCar-v0": "mountaincar",
 }
+#: ``n`` of each environment's ``Discrete(n)`` action space (a file claiming another is bad).
+ACTION_COUNTS = {"AbcoMaze3x3-v0": 4, "AbcoMaze5x5-v0": 4, "AbcoMaze10x10-v0": 4,
+                 "CartPole-v1": 2, "Acrobot-v1": 3, "MountainCar-v0": 3}
 _KIND_SUFFIX = {"expert": "expert", "pre_demonstrations": "pre"}
 VERSION = 0
 

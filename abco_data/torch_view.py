@@ -28,6 +28,7 @@ import torch
 from torch.utils.data import Dataset as TorchDataset
 
 from abco_data.format import ACTIONS, LazyH5File, ObservationReader
+from abco_data.values import check_observations
 
 if TYPE_CHECKING:  # typing only: abco_data.dataset imports this module, not the reverse
     from abco_data.dataset import Dataset
@@ -63,6 +64,7 @@ class TransitionDataset(TorchDataset):
                         else None)
         self.indices = None if indices is None else np.asarray(indices, dtype=np.int64)
         self.observations = dataset.load_arrays().observations if in_memory else None
+        self.observation_space = dataset.observation_space
         self._h5 = LazyH5File(self.path)  # opened by the process that reads (one per worker)
 
     def __len__(self) -> int:
@@ -76,7 +78,11 @@ class TransitionDataset(TorchDataset):
         rows = self.obs_t[items]
         wanted = np.concatenate([rows, rows + 1])
         obs = self._obs()
-        block = obs[wanted] if isinstance(obs, np.ndarray) else obs.rows(wanted)
+        if isinstance(obs, np.ndarray):
+            block = obs[wanted]
+        else:  # read now: checked as load_arrays checks the whole column
+            block = obs.rows(wanted)
+            check_observations(block, self.observation_space, self.path)
         return block[: len(rows)], block[len(rows) :]
 
     def _items(self, idx: list[int]) -> list[tuple[torch.Tensor, ...]]:

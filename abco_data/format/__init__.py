@@ -8,7 +8,9 @@ This package is the only place that knows the layout described in ``docs/format.
 - :mod:`abco_data.format.writer`: :class:`DatasetWriter`, the atomic writer;
 - :mod:`abco_data.format.reader`: :func:`open_h5`, :class:`LazyH5File` and
   :class:`ObservationReader`, which decodes palette-encoded observations
-  (:mod:`abco_data.palette`).
+  (:mod:`abco_data.palette`), with HDF5's errors turned into ones naming the file;
+- :mod:`abco_data.format.heaps`: the check that keeps HDF5 from looping forever on a damaged
+  global heap (run before every open).
 
 Every name is importable from ``abco_data.format`` itself.
 
@@ -20,10 +22,14 @@ Example:
     ('truncations', 'idm_eval_actions')
 """
 
+from abco_data.format.heaps import check_global_heaps
 from abco_data.format.reader import (
+    HDF5_ERRORS,
     LazyH5File,
     ObservationReader,
+    hdf5_errors,
     open_h5,
+    open_h5_file,
     read_column,
     read_rows,
 )
@@ -69,8 +75,9 @@ __all__ = [
     "FORMAT_VERSION", "GZIP_LEVEL", "IDM_EVAL_ACTIONS", "IMAGE_CHUNK_ROWS", "IMAGE_GZIP_LEVEL",
     "KINDS", "MAZE_EPISODE_COLUMNS", "OBSERVATIONS", "OBSERVATION_ENCODINGS", "PALETTE",
     "POSITIONS", "REFERENCE_COLUMNS", "REQUIRED_ROOT_ATTRS", "REWARDS", "TERMINATIONS",
-    "TRUNCATIONS", "VECTOR_CHUNK_BYTES", "DatasetWriter", "LazyH5File", "ObservationReader",
-    "action_column", "attr_value", "check_header", "chunk_rows", "episode_column",
-    "expected_rows", "open_h5", "read_column", "read_rows", "required_columns",
+    "TRUNCATIONS", "VECTOR_CHUNK_BYTES", "HDF5_ERRORS", "DatasetWriter", "LazyH5File",
+    "ObservationReader", "action_column", "attr_value", "check_global_heaps", "check_header",
+    "chunk_rows", "episode_column", "expected_rows", "hdf5_errors", "open_h5", "open_h5_file",
+    "read_column", "read_rows", "required_columns",
     "space_from_json", "space_to_json", "to_json",
 ]

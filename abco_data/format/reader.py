@@ -3,13 +3,18 @@
 :class:`ObservationReader` decodes palette-encoded observations transparently;
 :class:`LazyH5File` is the one read handle of a :class:`~abco_data.dataset.Dataset` or a torch
 view, opened on first use in the process that reads (h5py handles must not cross a fork).
+
+Every file is checked by :func:`~abco_data.format.heaps.check_global_heaps` before HDF5 opens
+it, and every HDF5 error met while reading (``OSError``, ``RuntimeError``, ``KeyError``)
+becomes a :class:`~abco_data.errors.CorruptDatasetError` that names the file
+(:func:`hdf5_errors`).
 """
 
 from __future__ import annotations
 
-import errno
 import math
 import os
+import stat
 import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -19,11 +24,38 @@ from typing import Any
 import h5py
 import numpy as np
 
-from abco_data.errors import CorruptDatasetError
+from abco_data.errors import CorruptDatasetError, DatasetFileNotFoundError, DatasetReadError
+from abco_data.format.heaps import check_global_heaps
 from abco_data.format.schema import OBSERVATION_ENCODINGS, OBSERVATIONS, PALETTE, attr_value
 from abco_data.palette import MAX_COLOURS, PaletteDecoder
 
-__all__ = ["open_h5", "read_column", "read_rows", "ObservationReader", "LazyH5File"]
+__all__ = ["HDF5_ERRORS", "open_h5", "open_h5_file", "hdf5_errors", "read_column",
+           "read_rows", "ObservationReader", "LazyH5File"]
+
+#: What h5py raises for a damaged file: ``OSError`` (unreadable data), ``RuntimeError``
+#: (inconsistent metadata) and ``KeyError`` (an object that cannot be opened).
+HDF5_ERRORS = (OSError, RuntimeError, KeyError)
+
+
+@contextmanager
+def hdf5_errors(path: str | os.PathLike[str], what: str = "data") -> Iterator[None]:
+    """Turn HDF5's errors raised in the block into a :class:`CorruptDatasetError` naming
+    ``path`` and ``what`` was being read.
+
+    Example:
+        >>> with hdf5_errors("/data/x.hdf5", "column rewards"):  # doctest: +ELLIPSIS
+        ...     raise OSError("Can't synchronously read data (filter returned failure)")
+        Traceback (most recent call last):
+        abco_data.errors.CorruptDatasetError: /data/x.hdf5: column rewards cannot be read ...
+    """
+    try:
+        yield
+    except CorruptDatasetError:
+        raise
+    except HDF5_ERRORS as err:
+        detail = str(err.args[0]) if isinstance(err, KeyError) and err.args else str(err)
+        raise CorruptDatasetError(f"{path}: {what} cannot be read (corrupt or truncated"
+                                  f" file): {detail}") from err
 
 
 def read_column(ds: h5py.Dataset, out: np.ndarray) -> None:
@@ -57,6 +89,13 @@ def _deflated_row_chunks(ds: h5py.Dataset) -> bool:
     return plist.get_nfilters() == 1 and plist.get_filter(0)[0] == h5py.h5z.FILTER_DEFLATE
 
 
+def _bad_index_bytes(colours: int, packed: bool) -> np.ndarray:
+    """A 256-entry table: whether a stored byte holds an index ``>= colours``."""
+    byte = np.arange(256)
+    bad = ((byte & 15) >= colours) | ((byte >> 4) >= colours) if packed else byte >= colours
+    return bad
+
+
 class ObservationReader:
     """Reads the ``observations`` column of an open file, decoding a palette transparently.
 
@@ -71,9 +110,11 @@ class ObservationReader:
     BLOCK_CHUNKS = 4
 
     def __init__(self, f: h5py.File) -> None:
+        self.path = f.filename
         self.ds = f[OBSERVATIONS]
         self.encoding = attr_value(f.attrs.get("observation_encoding", "raw"))
-        self.decoder: PaletteDecoder | None = None
+        self._palette: np.ndarray | None = None
+        self._decoder: PaletteDecoder | None = None
         if self.encoding in ("palette", "palette4"):
             if PALETTE not in f:
                 raise CorruptDatasetError(f"{f.filename}: observation_encoding is"
@@ -81,21 +122,32 @@ class ObservationReader:
                                           " missing")
             palette = f[PALETTE][()]
             if (palette.dtype != np.uint8 or palette.ndim != 2 or palette.shape[1] != 3
-                    or len(palette) > MAX_COLOURS or self.ds.dtype != np.uint8):
+                    or len(palette) > MAX_COLOURS or self.ds.dtype != np.uint8
+                    or len(np.unique(palette, axis=0)) != len(palette)):  # a colour twice
                 raise CorruptDatasetError(
                     f"{f.filename}: malformed {PALETTE} {palette.shape} {palette.dtype} for"
                     f" observations of {self.ds.dtype}")
-            self.decoder = PaletteDecoder(palette, packed=self.encoding == "palette4")
+            self._palette = palette
+            self._bad_byte = _bad_index_bytes(len(palette), self.encoding == "palette4")
         elif self.encoding != "raw":
             raise CorruptDatasetError(f"{f.filename}: unknown observation_encoding"
                                       f" {self.encoding!r}; expected one of"
                                       f" {OBSERVATION_ENCODINGS}")
-        self.shape = self.ds.shape if self.decoder is None else \
-            self.decoder.out_shape(self.ds.shape)
-        self.dtype = np.dtype(np.uint8) if self.decoder is not None else self.ds.dtype
-        self._raw_chunks = self.decoder is not None and _deflated_row_chunks(self.ds)
+        shape = self.ds.shape
+        if self.encoding == "palette4":
+            shape = (*shape[:-1], 2 * shape[-1])
+        self.shape = shape if self._palette is None else (*shape, 3)
+        self.dtype = np.dtype(np.uint8) if self._palette is not None else self.ds.dtype
+        self._raw_chunks = self._palette is not None and _deflated_row_chunks(self.ds)
         # The chunk shape, read once (h5py's properties cost microseconds a call).
         self._chunk: tuple[int, ...] = self.ds.chunks if self._raw_chunks else ()
+
+    @property
+    def decoder(self) -> PaletteDecoder | None:
+        """The palette decoder (built on first use: its look-up table takes ~10 ms)."""
+        if self._palette is not None and self._decoder is None:
+            self._decoder = PaletteDecoder(self._palette, packed=self.encoding == "palette4")
+        return self._decoder
 
     def __len__(self) -> int:
         return self.shape[0]
@@ -103,7 +155,7 @@ class ObservationReader:
     @property
     def palette(self) -> np.ndarray | None:
         """The ``(K, 3)`` palette, or None for raw observations."""
-        return None if self.decoder is None else self.decoder.palette
+        return self._palette
 
     def read(self, start: int = 0, stop: int | None = None,
              out: np.ndarray | None = None) -> np.ndarray:
@@ -114,8 +166,13 @@ class ObservationReader:
             out = np.empty((stop - start, *self.shape[1:]), dtype=self.dtype)
         if stop == start:
             return out
+        with hdf5_errors(self.path, "observations"):
+            return self._read(start, stop, out)
+
+    def _read(self, start: int, stop: int, out: np.ndarray) -> np.ndarray:
         if self.decoder is None:
             self.ds.read_direct(out, np.s_[start:stop], np.s_[0 : stop - start])
+            self._check_finite(out, start)
             return out
         if not self._raw_chunks:
             self._read_decoded(start, stop, out)
@@ -132,7 +189,7 @@ class ObservationReader:
         return out
 
     def _read_decoded(self, start: int, stop: int, out: np.ndarray) -> None:
-        """Rows ``start:stop`` read through HDF5 and decoded into ``out``.
+        """Rows ``start:stop`` read through HDF5, checked and decoded into ``out``.
 
         A few chunks at a time into one small buffer, decoded straight into ``out``: the only
         memory beyond ``out`` is that buffer and the decoder's ~1 MB gather buffer.
@@ -144,10 +201,12 @@ class ObservationReader:
         for a in range(start, stop, step):
             b = min(a + step, stop)
             self.ds.read_direct(buf, np.s_[a:b], np.s_[0 : b - a])
+            self._check_indices(buf[: b - a], a)
             self.decoder.decode_into(buf[: b - a], out[a - start : b - start])
 
     def _chunk_decoded(self, c: int, out: np.ndarray) -> None:
-        """The first ``len(out)`` rows of chunk ``c``, inflated here with zlib and decoded.
+        """The first ``len(out)`` rows of chunk ``c``, inflated here with zlib, checked and
+        decoded.
 
         Skips HDF5's filter pipeline and chunk cache, which inflate into the cache and copy
         out (twice the time of inflating into a fresh buffer for a whole-column read). Anything
@@ -165,13 +224,33 @@ class ObservationReader:
         if len(data) != size:
             self._read_decoded(c * n, c * n + len(out), out)
             return
-        stored = np.frombuffer(data, dtype=np.uint8).reshape(self._chunk)
-        self.decoder.decode_into(stored[: len(out)], out)
+        stored = np.frombuffer(data, dtype=np.uint8).reshape(self._chunk)[: len(out)]
+        self._check_indices(stored, c * n)
+        self.decoder.decode_into(stored, out)
 
     def rows(self, rows: np.ndarray) -> np.ndarray:
         """Rows ``rows`` (any order, repeats allowed) decoded; see :func:`read_rows`."""
-        block = read_rows(self.ds, rows)
-        return block if self.decoder is None else self.decoder.decode(block)
+        with hdf5_errors(self.path, "observations"):
+            block = read_rows(self.ds, rows)
+        if self.decoder is None:
+            self._check_finite(block, None)
+            return block
+        self._check_indices(block, None)
+        return self.decoder.decode(block)
+
+    def _check_indices(self, stored: np.ndarray, start: int | None) -> None:
+        """Every palette index of ``stored`` names a palette entry."""
+        if stored.size and self._bad_byte[stored].any():
+            where = "" if start is None else f" {start}..{start + len(stored) - 1}"
+            raise CorruptDatasetError(
+                f"{self.path}: observations{where} hold palette indices beyond the"
+                f" {len(self._palette)} entries of {PALETTE}")
+
+    def _check_finite(self, values: np.ndarray, start: int | None) -> None:
+        if values.dtype.kind == "f" and not np.isfinite(values).all():
+            where = "" if start is None else f" {start}..{start + len(values) - 1}"
+            raise CorruptDatasetError(f"{self.path}: observations{where} hold NaN or"
+                                      " infinite values")
 
     def __getitem__(self, key: slice) -> np.ndarray:
         start, stop, stride = key.indices(len(self))
@@ -181,27 +260,41 @@ class ObservationReader:
 
 
 
-@contextmanager
-def open_h5(path: str | os.PathLike[str]) -> Iterator[h5py.File]:
-    """Open ``path`` read-only, turning HDF5's errors into ones that name the file.
-
-    Raises:
-        FileNotFoundError: No file at ``path``.
-        CorruptDatasetError: Not an HDF5 file, or truncated.
-    """
+def open_h5_file(path: str | os.PathLike[str]) -> h5py.File:
+    """Open ``path`` read-only after checking it (see :func:`open_h5`); the caller closes it."""
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(errno.ENOENT, "no dataset file", str(path))
     try:
-        f = h5py.File(path, "r")
+        mode = path.stat().st_mode
+    except FileNotFoundError as err:
+        raise DatasetFileNotFoundError(f"{path}: no such dataset file") from err
     except OSError as err:
+        raise DatasetReadError(f"{path}: cannot read the dataset file: {err.strerror}") from err
+    if not stat.S_ISREG(mode):
+        raise DatasetReadError(f"{path}: not a regular file")
+    try:
+        check_global_heaps(path)
+        return h5py.File(path, "r")
+    except PermissionError as err:
+        raise DatasetReadError(f"{path}: cannot read the dataset file: {err.strerror}") from err
+    except HDF5_ERRORS as err:
         raise CorruptDatasetError(
             f"{path}: not a readable HDF5 file (truncated or corrupt): {err}") from err
+
+
+@contextmanager
+def open_h5(path: str | os.PathLike[str]) -> Iterator[h5py.File]:
+    """Open ``path`` read-only; HDF5's errors become errors that name the file.
+
+    Raises:
+        DatasetFileNotFoundError: No file at ``path``.
+        DatasetReadError: Not a regular file, or no permission to read it.
+        CorruptDatasetError: Not an HDF5 file, truncated, or damaged.
+    """
+    f = open_h5_file(path)
     try:
         yield f
     finally:
         f.close()
-
 
 
 class LazyH5File:
@@ -243,7 +336,7 @@ class LazyH5File:
         if not self.is_open:
             # A handle inherited over a fork belongs to the parent: forget it, never close it.
             self._file, self._reader = None, None
-            self._file = h5py.File(self.path, "r")
+            self._file = open_h5_file(self.path)
             self._pid = os.getpid()
         return self._file
 
@@ -251,7 +344,8 @@ class LazyH5File:
         """The observations column of this process's handle (a palette decoded on read)."""
         f = self.file()
         if self._reader is None:
-            self._reader = ObservationReader(f)
+            with hdf5_errors(self.path, "observations"):
+                self._reader = ObservationReader(f)
         return self._reader
 
     def close(self) -> None:

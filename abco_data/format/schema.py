@@ -226,7 +226,11 @@ def check_header(f: Any, path: Any) -> dict[str, Any]:
         CorruptDatasetError: Not an abco dataset, or a required attribute or column is missing.
         FormatVersionError: A ``format_version`` other than :data:`FORMAT_VERSION`.
     """
-    attrs = {k: attr_value(v) for k, v in f.attrs.items()}
+    try:
+        attrs = {k: attr_value(v) for k, v in f.attrs.items()}
+    except (TypeError, UnicodeDecodeError) as err:  # h5py decoding a damaged attribute type
+        raise CorruptDatasetError(f"{path}: root attributes cannot be read (corrupt file):"
+                                  f" {err}") from err
     if attrs.get("format") != FORMAT_NAME:
         raise CorruptDatasetError(
             f"{path}: not an abco dataset (root attribute 'format' is"

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import errno
 import os
-from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
@@ -121,7 +120,8 @@ class _Column:
 
 
 class DatasetWriter:
-    """Writes one dataset file atomically: a temp file next to the target, then ``os.replace``.
+    """Writes one dataset file atomically: built in memory, then written to a temporary file
+    next to the target and moved onto it with ``os.replace``.
 
     Use as a context manager. Columns are created on first append and grow in whole chunks,
     so a column's bytes depend only on its contents. An ``observations`` column of RGB
@@ -152,16 +152,12 @@ class DatasetWriter:
         self._columns: dict[str, _Column] = {}
 
     def __enter__(self) -> DatasetWriter:
-        # h5py creates the temporary file, so the final one gets the umask's usual permissions.
-        self._target: AbstractContextManager[Path] = atomic_target(self.path, "writing")
-        self.tmp = self._target.__enter__()
-        try:
-            self.file = h5py.File(self.tmp, "w-", libver="earliest", track_order=False)
-        except BaseException as err:
-            self._target.__exit__(type(err), err, err.__traceback__)
-            if isinstance(err, OSError):
-                raise self._write_error(err) from err
-            raise
+        # The file is built in memory and written out in one piece at the end: HDF5 never
+        # writes to disk, so a full disk is an OSError of a plain write (no HDF5 file left
+        # half-closed, which h5py would later close again from the garbage collector).
+        in_memory_name = f"{self.path.name}.{id(self):x}"  # unique among open HDF5 files
+        self.file = h5py.File(in_memory_name, "w", driver="core", backing_store=False,
+                              libver="earliest", track_order=False)
         return self
 
     def _write_error(self, err: OSError) -> DatasetWriteError:
@@ -195,24 +191,25 @@ class DatasetWriter:
         group.create_dataset(leaf, data=data, track_times=False)
 
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        image = None
         try:
-            try:
-                if exc_type is None:
-                    self._finish()
-            finally:
-                self.file.close()
-        except BaseException as err:
-            # The temporary goes; an OSError (a full disk, say) becomes a DatasetWriteError.
-            self._target.__exit__(type(err), err, err.__traceback__)
-            if isinstance(err, OSError):
-                raise self._write_error(err) from err
-            raise
-        try:
-            self._target.__exit__(exc_type, exc, tb)  # moves the file into place on success
+            if exc_type is None:
+                self._finish()
+                self.file.flush()
+                image = self.file.id.get_file_image()
         except OSError as err:
             raise self._write_error(err) from err
-        if isinstance(exc, OSError) and not isinstance(exc, DatasetWriteError):
-            raise self._write_error(exc) from exc
+        finally:
+            self.file.close()  # in memory: closing writes nothing to disk
+        if image is None:  # the block raised
+            if isinstance(exc, OSError) and not isinstance(exc, DatasetWriteError):
+                raise self._write_error(exc) from exc
+            return
+        try:
+            with atomic_target(self.path, "writing") as tmp, open(tmp, "xb") as out:
+                out.write(image)
+        except OSError as err:
+            raise self._write_error(err) from err
 
     def _finish(self) -> None:
         """Flush the columns' last rows, the palette and the root attributes (sorted)."""

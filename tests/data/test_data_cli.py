@@ -28,9 +28,10 @@ def test_generate_info_verify(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "episodes:    2" in out and "observations palette4 (5 colours)" in out
     assert cli.main(["verify", str(out_path)]) == 0
-    assert capsys.readouterr().out.startswith("OK ")
+    out = capsys.readouterr().out
+    assert out.startswith("OK ") and "match the bytes abco generates" in out
     assert cli.main(["verify", str(out_path), "--sha256", "0" * 64]) == 1
-    assert "does not match" in capsys.readouterr().err
+    assert "do not match" in capsys.readouterr().err
 
 
 def test_verify_reports_bad_files(tmp_path, capsys):
@@ -48,11 +49,15 @@ def test_verify_reports_bad_files(tmp_path, capsys):
 
 
 def test_unknown_id_and_bad_override(tmp_path, capsys):
-    assert cli.main(["info", "abco/nope-v0"]) == 1
+    assert cli.main(["info", "abco/nope-v0"]) == 2
     assert "known ids" in capsys.readouterr().err
     assert cli.main(["generate", "abco/maze3x3-pre-v0", "--out", str(tmp_path / "x.hdf5"),
-                     "--set", "colour=1", "--quiet"]) == 1
+                     "--set", "colour=1", "--quiet"]) == 2
     assert "colour" in capsys.readouterr().err
+    assert cli.main(["generate", "abco/maze3x3-pre-v0", "--set", "layouts=1"]) == 2
+    assert "--set needs --out" in capsys.readouterr().err
+    assert cli.main(["verify", str(tmp_path / "nothere.hdf5")]) == 2
+    assert "nothere.hdf5: no such dataset file" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
 
 

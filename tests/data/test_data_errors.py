@@ -54,8 +54,12 @@ def test_corrupt_chunk_is_found_by_verify(good):
     with open(good, "r+b") as fh:
         fh.seek(info.byte_offset + 10)
         fh.write(b"\xff" * 64)
-    with pytest.raises(CorruptDatasetError, match="observations") as err:
+    with pytest.raises(ChecksumError, match="the bytes abco generates") as err:
         abco_data.verify(good)
+    assert str(good) in str(err.value)
+    # Given the new bytes as the expected ones, reading them still fails.
+    with pytest.raises(CorruptDatasetError, match="observations") as err:
+        abco_data.verify(good, sha256=abco_data.sha256_of(good))
     assert str(good) in str(err.value)
 
 

@@ -8,7 +8,7 @@ import pytest
 from data_testing import make_small
 
 import abco_data
-from abco_data.errors import CorruptDatasetError
+from abco_data.errors import ChecksumError, CorruptDatasetError
 from abco_data.format import IMAGE_CHUNK_ROWS, DatasetWriter, ObservationReader
 from abco_data.palette import PaletteDecoder, PaletteEncoder, pack4, unpack4
 
@@ -162,13 +162,18 @@ def maze(tmp_path):
     return make_small("abco/maze3x3-pre-v0", tmp_path)
 
 
-def test_palette_index_out_of_range_is_found_by_verify(maze):
+def test_palette_index_out_of_range_is_found_by_every_reader(maze):
     with h5py.File(maze, "a") as f:
         assert f.attrs["observation_encoding"] == "palette4"
         f["observations"][0, 0, 0] = 0x9C  # nibbles 12 and 9
-    with pytest.raises(CorruptDatasetError, match="palette index 12") as err:
+    with pytest.raises(ChecksumError):  # the bytes are not the generator's
         abco_data.verify(maze)
-    assert str(maze) in str(err.value)
+    ds = abco_data.open_dataset(maze)
+    for read in (ds.load_arrays, lambda: ds.episode(0), lambda: ds.torch_dataset()[0],
+                 lambda: abco_data.verify(maze, sha256=abco_data.sha256_of(maze))):
+        with pytest.raises(CorruptDatasetError, match="palette indices beyond the 5") as err:
+            read()
+        assert str(maze) in str(err.value)
 
 
 def test_missing_palette_is_reported(maze):

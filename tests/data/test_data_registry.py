@@ -46,3 +46,13 @@ def test_overrides_are_checked():
     assert s.params["layouts"] == 100  # the registry's spec is untouched
     with pytest.raises(TypeError, match="episodes_per_layut"):
         s.with_overrides(episodes_per_layut=3)
+
+
+def test_action_counts_are_the_envs():
+    import gymnasium as gym
+
+    import abco_envs  # noqa: F401  (registers the mazes)
+
+    for env_id, n in abco_data.registry.ACTION_COUNTS.items():
+        kwargs = {"obs_type": "image", "image_size": 32} if "Maze" in env_id else {}
+        assert gym.make(env_id, **kwargs).action_space.n == n, env_id

@@ -11,6 +11,7 @@ set before anything is imported, as a user would.
 
 from __future__ import annotations
 
+import errno
 import functools
 import hashlib
 import json
@@ -410,6 +411,60 @@ def test_dataset_missing_from_manifest_is_generated_and_logged(
     assert hub_env.server.requests == []
     with pytest.raises(DatasetNotAvailableError, match="no entry"):
         hub.download(DATASET, progress=False)
+
+
+def test_cached_copy_without_manifest_entry_is_never_used_unchecked(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    hub_env.write_manifest(files={})
+    hub_env.abco_cache.mkdir()
+    (hub_env.abco_cache / FILENAME).write_bytes(b"tampered")
+    monkeypatch.setattr(hub, "generate", fake_generator(b"fresh"))
+    assert hub.fetch(DATASET, progress=False).read_bytes() == b"fresh"
+
+
+# --------------------------------------------------------------------------- cache safety
+
+
+def test_evicting_a_bad_copy_never_follows_a_link_out_of_the_cache(
+    hub_env: HubEnv, tmp_path: Path
+) -> None:
+    hub.download(DATASET, progress=False)
+    (hub_env.abco_cache / FILENAME).unlink()
+    snapshot = next(hub_env.hf_cache.rglob(f"snapshots/*/{FILENAME}"))
+    outside = tmp_path / "precious.bin"
+    outside.write_bytes(b"not the dataset, and not the cache's to delete")
+    snapshot.unlink()
+    snapshot.symlink_to(outside)
+    path = hub.download(DATASET, progress=False)  # bad copy evicted, downloaded again
+    assert path.read_bytes() == hub_env.data
+    assert outside.read_bytes() == b"not the dataset, and not the cache's to delete"
+
+
+def test_stale_temporaries_of_killed_runs_are_removed(hub_env: HubEnv) -> None:
+    hub_env.abco_cache.mkdir()
+    dead = hub_env.abco_cache / f".{FILENAME}.999999999-0123abcd.generating.abco-tmp"
+    mine = hub_env.abco_cache / f".{FILENAME}.{os.getpid()}-0123abcd.incoming.abco-tmp"
+    old_style = hub_env.abco_cache / f".{FILENAME}.{'0' * 32}.tmp"
+    other = hub_env.abco_cache / "notes.txt"
+    for path in (dead, mine, old_style, other):
+        path.write_bytes(b"x")
+    os.utime(old_style, (1, 1))  # 1970: long stale
+    hub.fetch(DATASET, progress=False)
+    assert hub_env.abco_files() == sorted([FILENAME, mine.name, other.name])
+
+
+def test_full_abco_cache_uses_the_verified_hub_copy(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    def no_space(*args: Any, **kwargs: Any) -> Path:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(hub, "install_verified", no_space)
+    with caplog.at_level(logging.WARNING, logger="abco_data.hub"):
+        path = hub.fetch(DATASET, progress=False)
+    assert path.is_relative_to(hub_env.hf_cache) and path.read_bytes() == hub_env.data
+    assert "No space left on device" in caplog.text and str(hub_env.abco_cache) in caplog.text
 
 
 # --------------------------------------------------------------------------- ids, manifest
