@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 import abco_data
+import abco_envs
 from abco_train.config import RunConfig
 
 __all__ = ["TrainingData", "resolve_dataset", "load_training_data", "KINDS"]
@@ -45,14 +46,23 @@ def resolve_dataset(
         cached_only: Never fetch or generate: read the cache only (raises if missing).
 
     Raises:
-        abco_data.DatasetError: The file or id is unusable; the message names it.
+        abco_data.DatasetError: The file or id is unusable (missing, damaged, another kind or
+            environment, a checksum mismatch, non-finite values); the message names it.
     """
     if ref is not None and Path(ref).is_file():
-        return abco_data.open_dataset(ref)
+        # A file given by hand is checked like one from the cache, before any training: its
+        # kind, environment, format version, checksum (when its id is known) and values.
+        return abco_data.check_dataset(ref, kind=kind, env_id=env_id)
     dataset_id = ref or abco_data.dataset_id(env_id, kind)
     if cached_only:
         home = Path(cache_dir) if cache_dir else abco_data.data_home()
         return abco_data.open_dataset(home / abco_data.spec(dataset_id).filename)
+    wanted = abco_data.spec(dataset_id)  # an id names its kind and env: check before fetching
+    if wanted.kind != kind or abco_envs.env_name(wanted.env_id) != abco_envs.env_name(env_id):
+        raise abco_data.WrongKindError(
+            f"{dataset_id} holds {wanted.kind} of {wanted.env_id}; this run needs {kind} of "
+            f"{env_id}")  # fmt: skip
+    # Loaded files are checked against the manifest's sha256 (or regenerated) by ``load``.
     return abco_data.load(dataset_id, cache_dir=cache_dir, progress=progress)
 
 

@@ -98,7 +98,7 @@ def record(n_episodes: int, steps: int) -> tuple[list[dict[str, np.ndarray]], An
 
 def abco_write(replay: ReplayEnv, n_episodes: int, path: Path) -> None:
     """Collect every transition of ``replay`` and write an abco dataset file."""
-    lengths = []
+    lengths, returns = [], []
     with DatasetWriter(path) as w:
         for _ in range(n_episodes):
             obs, _ = replay.reset()
@@ -116,15 +116,18 @@ def abco_write(replay: ReplayEnv, n_episodes: int, path: Path) -> None:
             w.append("terminations", np.asarray(terms))
             w.append("truncations", np.asarray(truncs))
             lengths.append(len(acts))
+            returns.append(float(np.sum(np.asarray(rews))))
         lengths = np.asarray(lengths, dtype=np.int64)
         starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
         for key, value in (("obs_offset", starts + np.arange(len(lengths))),
                            ("transition_offset", starts), ("length", lengths),
-                           ("seed", np.arange(len(lengths))), ("return", np.zeros(len(lengths)))):
+                           ("seed", np.arange(len(lengths))), ("return", np.asarray(returns))):
             w.append(f"episodes/{key}", value)
         n_tr = int(lengths.sum())
+        # Its registry id's env and kind (open_dataset refuses ids it cannot place); the bytes
+        # differ from the published file's, so nothing here passes for the real dataset.
         w.attrs.update({
-            "format": "abco-dataset", "format_version": 1, "dataset_id": "bench/maze-v0",
+            "format": "abco-dataset", "format_version": 1, "dataset_id": "abco/maze10x10-pre-v0",
             "kind": "pre_demonstrations", "env_id": "AbcoMaze10x10-v0", "env_spec": "{}",
             "env_kwargs": "{}", "observation_space": space_to_json(replay.observation_space),
             "action_space": space_to_json(replay.action_space), "generator": "bench",

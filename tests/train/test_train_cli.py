@@ -186,3 +186,30 @@ def test_cuda_run_resumes_and_loads_on_cpu(tiny_data, tmp_path, env) -> None:
     headline = "episodes" if env == "CartPole-v1" else "train/paper"
     assert np.isfinite(final[headline]["performance"])
     assert np.isfinite(policy.evaluate()[headline]["performance"])
+
+
+def test_data_given_to_the_trainer_is_checked_before_training(tiny_data, tmp_path, capsys):
+    import shutil
+
+    import h5py
+
+    expert, pre = tiny_data("CartPole-v1")
+    base = ["train", "--env", "CartPole-v1", "--method", "bco", "--quiet", "--iterations", "0"]
+    # a pre-demonstration file given as expert data
+    assert main([*base, "--expert-data", pre, "--pre-data", pre,
+                 "--run-dir", str(tmp_path / "a")]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and pre in err and "expert" in err
+    # one NaN in the observations
+    bad = tmp_path / "nan.hdf5"
+    shutil.copy(pre, bad)
+    with h5py.File(bad, "r+") as f:
+        f["observations"][0, 0] = np.nan
+    assert main([*base, "--expert-data", expert, "--pre-data", str(bad),
+                 "--run-dir", str(tmp_path / "b")]) == 2  # fmt: skip
+    assert str(bad) in capsys.readouterr().err
+    assert not (tmp_path / "b" / "metrics.jsonl").exists()  # refused before any training
+    # an id of the wrong kind
+    assert main([*base, "--pre-data", "abco/cartpole-expert-v0",
+                 "--run-dir", str(tmp_path / "c")]) == 2  # fmt: skip
+    assert "this run needs pre_demonstrations" in capsys.readouterr().err
