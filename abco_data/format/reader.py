@@ -89,13 +89,6 @@ def _deflated_row_chunks(ds: h5py.Dataset) -> bool:
     return plist.get_nfilters() == 1 and plist.get_filter(0)[0] == h5py.h5z.FILTER_DEFLATE
 
 
-def _bad_index_bytes(colours: int, packed: bool) -> np.ndarray:
-    """A 256-entry table: whether a stored byte holds an index ``>= colours``."""
-    byte = np.arange(256)
-    bad = ((byte & 15) >= colours) | ((byte >> 4) >= colours) if packed else byte >= colours
-    return bad
-
-
 class ObservationReader:
     """Reads the ``observations`` column of an open file, decoding a palette transparently.
 
@@ -128,7 +121,6 @@ class ObservationReader:
                     f"{f.filename}: malformed {PALETTE} {palette.shape} {palette.dtype} for"
                     f" observations of {self.ds.dtype}")
             self._palette = palette
-            self._bad_byte = _bad_index_bytes(len(palette), self.encoding == "palette4")
         elif self.encoding != "raw":
             raise CorruptDatasetError(f"{f.filename}: unknown observation_encoding"
                                       f" {self.encoding!r}; expected one of"
@@ -239,12 +231,23 @@ class ObservationReader:
         return self.decoder.decode(block)
 
     def _check_indices(self, stored: np.ndarray, start: int | None) -> None:
-        """Every palette index of ``stored`` names a palette entry."""
-        if stored.size and self._bad_byte[stored].any():
+        """Every palette index of ``stored`` names a palette entry.
+
+        Two max-reductions over the nibbles (or one over the bytes): several times faster than
+        a table look-up of every byte, which took a third of a whole-column read.
+        """
+        if not stored.size:
+            return
+        colours = len(self._palette)
+        if self.encoding == "palette4":
+            top = max(int((stored & 15).max()), int((stored >> 4).max()))
+        else:
+            top = int(stored.max())
+        if top >= colours:
             where = "" if start is None else f" {start}..{start + len(stored) - 1}"
             raise CorruptDatasetError(
                 f"{self.path}: observations{where} hold palette indices beyond the"
-                f" {len(self._palette)} entries of {PALETTE}")
+                f" {colours} entries of {PALETTE}")
 
     def _check_finite(self, values: np.ndarray, start: int | None) -> None:
         if values.dtype.kind == "f" and not np.isfinite(values).all():

@@ -254,8 +254,9 @@ def test_reader_leaves_unusual_chunks_to_hdf5(tmp_path):
         np.testing.assert_array_equal(reader.read(2, 13), expect[2:13])
     with h5py.File(tmp_path / "a.h5", "a") as f:
         f["observations"].id.write_direct_chunk((8, 0, 0), b"not deflate data")
-    with h5py.File(tmp_path / "a.h5") as f, pytest.raises(OSError):
-        ObservationReader(f).read()  # HDF5's own error, as Dataset and verify expect
+    with h5py.File(tmp_path / "a.h5") as f, pytest.raises(CorruptDatasetError) as err:
+        ObservationReader(f).read()  # HDF5's own error, named by the reader
+    assert isinstance(err.value.__cause__, OSError)
     with h5py.File(tmp_path / "b.h5", "w") as f:
         f.attrs["observation_encoding"] = "palette4"
         f["observation_palette"] = palette
