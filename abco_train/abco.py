@@ -190,9 +190,10 @@ class ABCO(Method):
         self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=config.lr)
         # -- data as torch tensors (no copies) ------------------------------------------------
         self.pre_obs = torch.from_numpy(data.pre_obs)
-        keep, held = validation_split(len(data.pre_t), config.idm_validation, config.seed)
         if self.idm_data is None:  # BC has no IDM to measure
             keep, held = np.arange(len(data.pre_t)), np.zeros(0, dtype=np.int64)
+        else:
+            keep, held = validation_split(len(data.pre_t), config.idm_validation, config.seed)
         self.pre_t = torch.from_numpy(data.pre_t[keep])
         self.pre_actions = torch.from_numpy(data.pre_actions[keep])
         self.val_t = torch.from_numpy(data.pre_t[held])

@@ -165,10 +165,8 @@ class RunConfig:
                 **(method_defaults or {})}  # fmt: skip
         values = asdict(self)
         for name, default in base.items():
-            if values[name] is None:
-                values[name] = default
-        if values["pre_data"] == "start":  # the regime's start-cell pre-demonstrations
-            values["pre_data"] = start_cell_dataset(self.env)
+            if values[name] is None:  # a callable default depends on the env (a dataset id)
+                values[name] = default(self.env) if callable(default) else default
         if values["run_dir"] is None:
             values["run_dir"] = str(Path("runs") / f"{self.env}-{self.method}-s{self.seed}")
         return RunConfig(**values)
@@ -247,9 +245,10 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
 #: the table above: one IDM epoch and one policy epoch per iteration, no longer first
 #: iteration, more iterations; for mazes, pre-demonstrations recorded as an agent that resets
 #: the env would: from the start cell, moves into walls dropped (``{maze}-pre-start-v0``).
+#: A callable default is called with the env id.
 REGIME_DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
     ("maze", "authors"): {"idm_epochs": 1, "policy_epochs": 1, "first_epochs_factor": 1,
-                          "iterations": 10, "pre_data": "start"},
+                          "iterations": 10, "pre_data": start_cell_dataset},
     ("classic", "authors"): {"idm_epochs": 1, "policy_epochs": 1, "first_epochs_factor": 1,
                              "iterations": 10},
 }  # fmt: skip

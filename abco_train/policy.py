@@ -23,13 +23,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 
 from abco_train.config import RunConfig, env_kind
 from abco_train.data import TrainingData, load_training_data
 from abco_train.methods import Method, get_method
 from abco_train.run_folder import CHECKPOINT, CONFIG, RunFolderError, read_json
-from abco_train.train import final_evaluation, resolve_device, seed_everything
+from abco_train.train import final_evaluation, load_checkpoint, resolve_device, seed_everything
 
 __all__ = ["Policy", "load_policy", "record_gif"]
 
@@ -59,7 +58,7 @@ class Policy:
         """Greedy action(s): one observation -> an ``int``; a batch -> an ``(B,)`` array."""
         obs = np.asarray(obs)
         single = obs.shape == tuple(self.observation_space.shape)
-        actions = np.asarray(self.method.act(obs[None] if single else obs)).reshape(-1)
+        actions = self.act(obs[None] if single else obs)
         return int(actions[0]) if single else actions
 
     def act(self, obs: np.ndarray) -> np.ndarray:
@@ -91,10 +90,7 @@ def load_policy(run_dir: str | os.PathLike[str], *, device: str = "cpu", quiet: 
     known = {f.name for f in fields(RunConfig)}
     cfg = RunConfig(**{k: v for k, v in values.items() if k in known})
     cfg = cfg.replace(run_dir=str(run_dir), quiet=quiet, device=resolve_device(device))
-    try:
-        state = torch.load(run_dir / CHECKPOINT, map_location=cfg.device, weights_only=False)
-    except (RuntimeError, EOFError, OSError, ValueError) as exc:
-        raise RunFolderError(f"{run_dir / CHECKPOINT} is damaged ({exc})") from None
+    state = load_checkpoint(run_dir / CHECKPOINT, cfg.device)
     rng = seed_everything(cfg.seed, cfg.threads, cfg.deterministic)
     data = load_training_data(cfg)
     method = get_method(cfg.method)(cfg, data, rng)

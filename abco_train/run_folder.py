@@ -10,8 +10,9 @@ A run folder holds::
     final.json         the final evaluation (mazes: train and test splits, both protocols)
     metrics.png, labels.png, paths_{split}.png   the plots
 
-Files are written whole or not at all (:func:`write_atomic`): a killed run never leaves a
-half-written ``final.json`` or checkpoint.
+Files are written whole or not at all (:func:`write_atomic`, on
+:func:`abco_data.files.atomic_target`): a killed run never leaves a half-written
+``final.json`` or checkpoint, and the temporaries of killed runs are removed on the next write.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from abco_data.files import atomic_target
 from abco_train.config import comparable
 
 __all__ = ["CONFIG", "METRICS", "CHECKPOINT", "FINAL", "RunFolderError", "write_atomic",
@@ -45,17 +47,12 @@ def write_atomic(path: str | os.PathLike[str], write: Callable[[Path], Any] | st
         write: The text to write, or ``write(tmp_path)`` that writes the file itself (e.g.
             ``lambda p: torch.save(obj, p)``).
     """
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    with atomic_target(path) as tmp:  # the data layer's one temp-then-rename helper
         if isinstance(write, str):
             tmp.write_text(write)
         else:
             write(tmp)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+    return Path(path)
 
 
 def read_json(path: str | os.PathLike[str]) -> Any:

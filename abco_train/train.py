@@ -37,6 +37,7 @@ from abco_train.run_folder import (
 )
 
 __all__ = ["train", "final_evaluation", "format_table", "seed_everything", "resolve_device",
+           "load_checkpoint",
            "EVAL_SEED", "FINAL_SEED"]  # fmt: skip
 
 EVAL_SEED = 100_000_000
@@ -121,7 +122,7 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
         return stored
     run_dir.mkdir(parents=True, exist_ok=True)
     ckpt_path, metrics_path = run_dir / CHECKPOINT, run_dir / METRICS
-    state = _load_checkpoint(ckpt_path, cfg.device)
+    state = load_checkpoint(ckpt_path, cfg.device)
     if state is not None and comparable(state["config"]) != comparable(asdict(cfg)):
         raise RunFolderError(
             f"{run_dir} holds a run of another config; use another --run-dir or delete it"
@@ -197,7 +198,7 @@ def _failed(cfg: RunConfig, run_dir: Path, iteration: int, failure: TrainingFail
     write_atomic(run_dir / FINAL, json.dumps(final, indent=2))
     return final
 
-def _load_checkpoint(path: Path, device: str) -> dict[str, Any] | None:
+def load_checkpoint(path: Path, device: str) -> dict[str, Any] | None:
     """The checkpoint's state on ``device`` (a GPU run resumes on CPU), ``None`` without one.
 
     Raises:
