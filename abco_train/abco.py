@@ -162,13 +162,18 @@ class ABCO(Method):
     """ABCO(alpha) with the switches of :data:`VARIANTS` (see the module docstring)."""
 
     @classmethod
+    def variant(cls, name: str) -> dict[str, Any]:
+        """The switches of the method registered as ``name`` (a subclass may add its own)."""
+        return VARIANTS[name]
+
+    @classmethod
     def defaults(cls, name: str) -> Mapping[str, Any]:
         """The variant's attention switch (``--attention`` overrides it)."""
-        return {"attention": VARIANTS[name]["attention"]}
+        return {"attention": cls.variant(name)["attention"]}
 
     def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
         super().__init__(config, data, rng)
-        variant = VARIANTS[config.method]
+        variant = self.variant(config.method)
         self.idm_data, self.iterative = variant["idm_data"], variant["iterative"]
         # -- networks (mean/std of the states standardise vector inputs) ----------------------
         stats: dict[str, np.ndarray] = {}
@@ -196,6 +201,8 @@ class ABCO(Method):
             keep, held = validation_split(len(data.pre_t), config.idm_validation, config.seed)
         self.pre_t = torch.from_numpy(data.pre_t[keep])
         self.pre_actions = torch.from_numpy(data.pre_actions[keep])
+        if self.idm_data is not None:  # its IDM learns from (and is measured on) all of I_pre
+            self.count("pre_demonstration", len(data.pre_t))
         self.val_t = torch.from_numpy(data.pre_t[held])
         self.val_actions = torch.from_numpy(data.pre_actions[held])
         shares = np.bincount(data.pre_actions[held], minlength=data.n_actions) / max(len(held), 1)
@@ -342,6 +349,8 @@ class ABCO(Method):
         """Append the runs to ``I_pos`` and re-sample ``I_s`` for the next iteration."""
         if not self.iterative or self.idm_data is None or rollouts.observations is None:
             return {}
+        if iteration + 1 < self.num_iterations:  # the last iteration's runs train nothing
+            self.count("post_demonstration", int(rollouts.lengths.sum()))
         keep_all = self.idm_data in ("pos", "pre+pos", "whole")
         runs = np.arange(len(rollouts.successes))
         keep = runs if keep_all else runs[rollouts.successes]

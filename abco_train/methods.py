@@ -13,11 +13,19 @@ To plug in another method, subclass :class:`Method` and register it::
     class MyIfO(Method):
         def train_iteration(self, iteration): ...   # -> dict of scalars to log
         def act(self, obs): ...                     # batched greedy actions
+        def observe(self, iteration, rollouts): ... # optional: post-demonstrations
         def state_dict(self): ...
         def load_state_dict(self, state): ...
 
 then ``abco train --method my-ifo --plugin my_module.py`` (or ``--plugin my_package.module``)
 trains and evaluates it exactly like ABCO, and ``abco bench --plugin ...`` runs it in a grid.
+
+Fair comparisons need every run's cost in environment interactions, so a method counts them
+(:meth:`Method.count`) by kind (:data:`INTERACTION_KINDS`): pre-demonstration transitions it
+trains on, post-demonstration (rollout) steps it learns from, RL steps and action-remapping
+steps it takes in an env of its own (:func:`abco_train.evaluate.make_vector_env`). Evaluation
+episodes are never counted. The harness stores the counts with every iteration's metrics, in
+checkpoints and in ``final.json``.
 """
 
 from __future__ import annotations
@@ -39,10 +47,15 @@ if TYPE_CHECKING:
     from abco_train.evaluate import Rollouts
 
 __all__ = ["Method", "register", "get_method", "available", "load_plugins", "resolve_config",
-           "PluginError", "TrainingFailed", "BUILTIN_MODULES"]  # fmt: skip
+           "PluginError", "TrainingFailed", "BUILTIN_MODULES", "INTERACTION_KINDS"]  # fmt: skip
 
 #: Modules whose import registers the built-in methods (imported on first lookup).
-BUILTIN_MODULES = ("abco_train.abco",)
+BUILTIN_MODULES = ("abco_train.abco", "abco_train.iupe")
+
+#: Kinds of environment interaction a run may spend (evaluation episodes are not counted):
+#: transitions of the pre-demonstrations it trains on, rollout steps it learns from
+#: (post-demonstrations), reinforcement-learning steps, and steps that learn an action mapping.
+INTERACTION_KINDS = ("pre_demonstration", "post_demonstration", "rl", "remapping")
 
 _REGISTRY: dict[str, type[Method]] = {}
 
@@ -69,8 +82,9 @@ class Method(ABC):
     """An IfO method trained in iterations ``0..num_iterations-1`` by the harness.
 
     Per iteration the harness calls :meth:`train_iteration`, then evaluates :meth:`act` on
-    the evaluation episodes (with observations and actions recorded), then passes those
-    rollouts to :meth:`observe`.
+    the evaluation episodes, then passes post-demonstrations to :meth:`observe`: the
+    evaluation runs themselves (recorded), or, for a method with ``explores = True``, runs of
+    the same episodes whose actions come from :meth:`explore` (evaluation stays greedy).
 
     Args:
         config: The run's resolved config; method-specific options are in
@@ -80,8 +94,24 @@ class Method(ABC):
             seeded by the harness) so that a seed fixes the run.
     """
 
+    #: Post-demonstrations come from :meth:`explore` rollouts, not from the evaluation runs.
+    explores: bool = False
+
     def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
         self.config, self.data, self.rng = config, data, rng
+        #: Environment interactions spent so far, by kind (:data:`INTERACTION_KINDS`).
+        self.interactions: dict[str, int] = dict.fromkeys(INTERACTION_KINDS, 0)
+
+    def count(self, kind: str, steps: int) -> None:
+        """Add ``steps`` environment interactions of ``kind`` to the run's cost.
+
+        Raises:
+            ValueError: ``kind`` is not one of :data:`INTERACTION_KINDS`.
+        """
+        if kind not in INTERACTION_KINDS:
+            raise ValueError(f"unknown interaction kind {kind!r}; expected one of "
+                             f"{INTERACTION_KINDS}")  # fmt: skip
+        self.interactions[kind] += int(steps)
 
     @classmethod
     def defaults(cls, name: str) -> Mapping[str, Any]:
@@ -106,8 +136,14 @@ class Method(ABC):
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Greedy actions for a batch of observations (one call per environment step)."""
 
+    def explore(self, obs: np.ndarray) -> np.ndarray:
+        """Actions of the post-demonstration rollouts when ``explores`` (default: greedy)."""
+        return self.act(obs)
+
     def observe(self, iteration: int, rollouts: Rollouts) -> dict[str, float]:
-        """Take the post-demonstrations of ``iteration`` (every evaluation run, recorded)."""
+        """Take the post-demonstrations of ``iteration`` (recorded runs; see the class doc).
+
+        A method that learns from them counts their steps as ``post_demonstration``."""
         return {}
 
     def expert_labels(self) -> np.ndarray | None:

@@ -95,6 +95,7 @@ def load_policy(run_dir: str | os.PathLike[str], *, device: str = "cpu", quiet: 
     data = load_training_data(cfg)
     method = get_method(cfg.method)(cfg, data, rng)
     method.load_state_dict(state["method"])
+    method.interactions.update(state.get("interactions", {}))
     return Policy(cfg, method, data, int(state["iteration"]))
 
 

@@ -137,6 +137,7 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
     start = 0
     if state is not None:
         method.load_state_dict(state["method"])
+        method.interactions.update(state.get("interactions", {}))
         torch.set_rng_state(state["torch_rng"].cpu())
         if state.get("cuda_rng") is not None and cfg.device.startswith("cuda"):
             torch.cuda.set_rng_state_all([x.cpu() for x in state["cuda_rng"]])
@@ -154,21 +155,27 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
             stats = method.train_iteration(i)
         except TrainingFailed as failure:  # never a normal-looking result
             bar.close()
-            return _failed(cfg, run_dir, i, failure, history)
+            return _failed(cfg, run_dir, i, failure, history, dict(method.interactions))
         t_train = time.perf_counter() - t0
-        roll = rollout(method.act, cfg.env, protocol=cfg.protocol, record=True,
-                       **_eval_kwargs(cfg, data, "train", EVAL_SEED))  # fmt: skip
+        episodes = _eval_kwargs(cfg, data, "train", EVAL_SEED)
+        roll = rollout(method.act, cfg.env, protocol=cfg.protocol, record=not method.explores,
+                       **episodes)  # fmt: skip
         evaluation = score(roll, data.reference)
+        if method.explores:  # post-demonstrations of its own: the same episodes, explored
+            roll = rollout(method.explore, cfg.env, protocol=cfg.protocol, record=True,
+                           **episodes)  # fmt: skip
         post = method.observe(i, roll)
         record = {
             "iteration": i, "train": stats, "eval": evaluation, "post": post,
             "label_distribution": _label_distribution(method.expert_labels(), data.n_actions),
+            "interactions": dict(method.interactions),
             "seconds_train": t_train, "seconds": time.perf_counter() - t0,
         }  # fmt: skip
         history.append(record)
         with metrics_path.open("a") as f:
             f.write(json.dumps(record) + "\n")
         payload = {"iteration": i, "method": method.state_dict(),
+                   "interactions": dict(method.interactions),
                    "torch_rng": torch.get_rng_state(), "config": asdict(cfg),
                    "cuda_rng": torch.cuda.get_rng_state_all() if cfg.device.startswith("cuda")
                    else None}  # fmt: skip
@@ -185,15 +192,17 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
     return final
 
 
-def _failed(cfg: RunConfig, run_dir: Path, iteration: int, failure: TrainingFailed,
-            history: list[dict[str, Any]]) -> dict[str, Any]:  # fmt: skip
+def _failed(
+    cfg: RunConfig, run_dir: Path, iteration: int, failure: TrainingFailed,
+    history: list[dict[str, Any]], interactions: dict[str, int],
+) -> dict[str, Any]:  # fmt: skip
     """Record a failed run: its last iteration's statistics, and a ``final.json`` with the
     failure's status and message and no evaluation (nothing to average by mistake)."""
     record = {"iteration": iteration, "train": failure.stats, "status": failure.status}
     with (run_dir / METRICS).open("a") as f:
         f.write(json.dumps(record) + "\n")
     final = {"env": cfg.env, "method": cfg.method, "seed": cfg.seed, "status": failure.status,
-             "message": str(failure), "iteration": iteration,
+             "message": str(failure), "iteration": iteration, "interactions": interactions,
              "seconds": float(sum(h["seconds"] for h in history))}  # fmt: skip
     write_atomic(run_dir / FINAL, json.dumps(final, indent=2))
     return final
@@ -262,6 +271,7 @@ def final_evaluation(
         figures["labels"] = str(plots.plot_label_distribution(
             history, data.expert_eval_actions, data.n_actions, run_dir / "labels.png"))
     results["figures"] = figures
+    results["interactions"] = dict(method.interactions)
     results["seconds"] = float(sum(h["seconds"] for h in history))
     return results
 
