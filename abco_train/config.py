@@ -118,7 +118,7 @@ class RunConfig:
     idm_patience: int | None = _opt("stop the IDM's epochs after this many without a better "
                                     "validation accuracy (the best weights are kept)", min=1)
     idm_validation: int | None = _opt("pre-demonstration transitions held out to measure the "
-                                      "IDM (default: 10%%, at most 2,000)", min=1)
+                                      "IDM (default: 10%, at most 2,000)", min=1)
     policy_epochs: int | None = _opt("policy epochs over the expert data per iteration", min=1)
     first_epochs_factor: int | None = _opt("iteration 0 trains both nets this many times longer",
                                            min=1)  # fmt: skip
@@ -312,9 +312,12 @@ def add_config_options(
         default = None if f.default is MISSING else f.default
         shown = "per env, preset and method (abco_train.config.DEFAULTS)" if default is None \
             else default  # fmt: skip
-        help_text = f"{f.metadata.get('help', '')} (default: {shown})".replace("%", "%%")
-        kwargs: dict[str, Any] = {"default": None if unset_defaults else default,
-                                  "help": help_text, "dest": f.name}  # fmt: skip
+        help_text = f.metadata.get("help", "")
+        option_default = None if unset_defaults else default
+        if "(default:" not in help_text:  # a help text may name its default itself
+            help_text += f" (default: {shown})"
+        kwargs: dict[str, Any] = {"default": option_default, "dest": f.name,
+                                  "help": help_text.replace("%", "%%")}  # fmt: skip
         if kind is bool:
             parser.add_argument(flag_of(f.name), action=argparse.BooleanOptionalAction, **kwargs)
         elif kind is dict:
