@@ -213,3 +213,13 @@ def test_data_given_to_the_trainer_is_checked_before_training(tiny_data, tmp_pat
     assert main([*base, "--pre-data", "abco/cartpole-expert-v0",
                  "--run-dir", str(tmp_path / "c")]) == 2  # fmt: skip
     assert "this run needs pre_demonstrations" in capsys.readouterr().err
+
+
+def test_every_option_names_its_default_once(capsys) -> None:
+    from abco_train.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["bench", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "(default: 10%, at most 2,000)" in text and "%%" not in text
+    assert "self-attention in both networks (default: the method's) --idm-input" in text
