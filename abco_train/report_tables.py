@@ -1,6 +1,6 @@
 """The Markdown tables and summaries of ``abco report`` (:mod:`abco_train.report`).
 
-Each function takes the grid (:class:`abco_train.report.Grid`) and returns Markdown lines;
+Each function takes the grid (:class:`abco_train.report_grid.Grid`) and returns Markdown lines;
 the tables also append their numbers to the CSV rows (one row per statistic).
 
 Example:
@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from abco_train.methods import INTERACTION_KINDS
-from abco_train.report import (
+from abco_train.report_grid import (
     GOALS,
     TABLE1_ENVS,
     TABLE1_METHODS,
