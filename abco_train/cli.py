@@ -116,7 +116,7 @@ def _positive(text: str) -> int:
 def _report(args: argparse.Namespace) -> int:
     from abco_train.report import write_report
 
-    files = write_report(args.runs_dir, args.out, args.labels_env)
+    files = write_report(args.runs_dir, args.out, args.labels_env, args.baseline)
     print(f"report: {files['report']}\ncsv: {files['csv']}")
     return 0
 
@@ -126,6 +126,9 @@ def _report_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None, help="output folder (default RUNS_DIR/report)")
     parser.add_argument("--labels-env", default="AbcoMaze5x5-v0",
                         help="env of the IDM label-distribution plot (default the 5x5 maze)")
+    parser.add_argument("--baseline", default=None, metavar="METHOD",
+                        help="reference method of the probability of improvement (default"
+                        " abco); must be a method of the grid")  # fmt: skip
 
 
 # -- abco play -------------------------------------------------------------------------------

@@ -3,7 +3,9 @@
 Inverse dynamics by nearest neighbour: each expert pair ``(s, s')`` gets the action of the
 pre-demonstration transition closest to it in ``(s, s' - s)`` (standardised); the policy
 then acts like the expert state nearest to its observation. No training, numpy only, for
-the vector environments (CartPole-v1, Acrobot-v1, MountainCar-v0).
+the vector environments (CartPole-v1, Acrobot-v1, MountainCar-v0). It counts the
+pre-demonstration transitions it uses (``self.count``); it takes no environment steps of its
+own, so its other interaction counts stay 0.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ class NearestNeighbourIfO(Method):
         super().__init__(config, data, rng)
         max_pre = int(config.method_options.get("max_pre", 5000))
         keep = rng.permutation(len(data.pre_t))[:max_pre]  # the run's seed picks the subset
+        self.count("pre_demonstration", len(keep))  # the run's cost: pre-demonstrations used
         rows = data.pre_t[keep]
         s = data.pre_obs[rows].astype(np.float64)
         self.pre_x = np.concatenate([s, data.pre_obs[rows + 1] - s], axis=1)

@@ -51,7 +51,11 @@ def test_user_method_beside_abco(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
         assert abco_main(argv[1:]) == 0
     assert (tmp_path / "runs" / "knn" / "final.json").exists()
     md = (tmp_path / "runs" / "mine" / "report" / "report.md").read_text()
-    assert "| CartPole-v1 | knn-ifo | 1 |" in md and "| CartPole-v1 | abco | 1 |" in md
+    main = md.split("## Table 1 re-measured", 1)[1].split("\n## ", 1)[0]
+    assert "| CartPole-v1 | knn-ifo | 1 |" in main and "| CartPole-v1 | ABCO(α) | 1 |" in main
+    knn = next(x for x in main.splitlines() if x.startswith("| CartPole-v1 | knn-ifo |"))
+    pre, post, rl, remap = knn.strip("| ").split(" | ")[-4:]  # the pre-demos it counted
+    assert int(pre.replace(",", "")) > 0 and (post, rl, remap) == ("0", "0", "0")
     # the Python API block: the same grid, now all finished, then the report
     code = _blocks("python")[-1].replace("[0, 1, 2, 3, 4]", "[0]")
     namespace = {"OVERRIDES": overrides}

@@ -13,6 +13,7 @@ import abco_data
 from abco_train import grid as bench
 from abco_train import paper
 from abco_train.cli import main as abco_main
+from abco_train.methods import INTERACTION_KINDS
 
 TINY_TRAINING = {"iterations": 1, "idm_epochs": 1, "policy_epochs": 1, "eval_episodes": 3}
 
@@ -124,18 +125,31 @@ def test_report_from_grid(grid: dict[str, Any], tmp_path: Path) -> None:
     assert abco_main(["report", str(grid["out"]), "--out", str(tmp_path), "--labels-env",
                         "CartPole-v1"]) == 0  # fmt: skip
     md = (tmp_path / "report.md").read_text()
-    for heading in ("## Table 1: train split", "## Table 1, mazes on the held-out test split",
-                    "## Table 2: ablation", "## Goals for ABCO", "## Reference returns",
-                    "## Wall time", "## Missing, unfinished, failed or stopped cells"):  # fmt: skip
+    for heading in ("## Table 1 re-measured", "## Table 1, mazes on the held-out test split",
+                    "## Table 2: ablation", "## Goals", "## Reference returns",
+                    "## Wall time", "## Missing, unfinished, failed or stopped cells",
+                    "## Aggregates across the 6 environments",
+                    "## Which environments separate methods"):  # fmt: skip
         assert heading in md
-    assert "AbcoMaze5x5-v0 / abco: missing all seeds" in md  # cells not in the tiny grid
-    assert "CartPole-v1 / bc: missing all seeds" in md
+    # cells not in the tiny grid: summarised, one line per method
+    assert ("- no finished run at all: bc, bco, iupe, ilpo, gaifo (6 envs × seeds 0-1, 60"
+            " cells)") in md  # fmt: skip
+    assert ("- abco: Acrobot-v1, MountainCar-v0, AbcoMaze3x3-v0, AbcoMaze5x5-v0,"
+            " AbcoMaze10x10-v0 × seeds 0-1 (10 cells)") in md  # fmt: skip
     assert "short by" in md  # a tiny budget falls short of the paper's CartPole
+    assert "No method has finished runs on every environment." in md
+    # the runs' interaction counts, beside P and AER
+    for method in ("BCO(α)", "ABCO(α)"):
+        row = next(x for x in md.splitlines() if x.startswith(f"| CartPole-v1 | {method} |"))
+        pre, post, rl, remap = row.strip("| ").split(" | ")[-4:]
+        assert int(pre.replace(",", "")) > 0 and int(post.replace(",", "")) > 0
+        assert (rl, remap) == ("0", "0")
     assert (tmp_path / "performance_per_iteration.png").stat().st_size > 0
     assert (tmp_path / "idm_label_distribution.png").stat().st_size > 0
     with (tmp_path / "results.csv").open() as f:
         rows = list(csv.DictReader(f))
-    measured = [r for r in rows if r["table"] == "table1" and r["seeds"] != "0"]
+    measured = [r for r in rows if r["table"] == "table1" and r["seeds"] != "0"
+                and not r["metric"].startswith("interactions/")]
     assert {(r["method"], r["metric"]) for r in measured} == {
         ("bco-alpha", "performance"), ("bco-alpha", "aer"), ("abco", "performance"),
         ("abco", "aer")}  # fmt: skip
@@ -151,6 +165,10 @@ def test_report_from_grid(grid: dict[str, Any], tmp_path: Path) -> None:
         assert float(r["paper"]) == paper.PAPER_TABLE1[r["method"]]["CartPole-v1"][
             0 if r["metric"] == "performance" else 1]
     # the CSV's numbers are the Markdown's
+    counted = {(r["method"], r["metric"]) for r in rows if r["table"] == "table1"
+               and r["metric"].startswith("interactions/")}  # fmt: skip
+    assert counted == {(m, f"interactions/{k}") for m in ("bco-alpha", "abco")
+                       for k in INTERACTION_KINDS}  # fmt: skip
     abco_p = next(r for r in measured if r["method"] == "abco" and r["metric"] == "performance")
     assert f"{float(abco_p['mean']):.3f} [{float(abco_p['ci_low']):.3f}," in md
 

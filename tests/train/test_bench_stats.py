@@ -57,4 +57,22 @@ def test_paper_numbers() -> None:
     assert set(paper.PAPER_TABLE2) == set(report.TABLE2_METHODS) - {"bco-alpha-torabi"}
     from abco_train.abco import VARIANTS
 
-    assert set(report.TABLE1_METHODS) | set(report.TABLE2_METHODS) <= set(VARIANTS)
+    coming = {"ilpo", "gaifo"}  # being written; their names are fixed
+    assert set(report.TABLE1_METHODS) | set(report.TABLE2_METHODS) <= set(VARIANTS) | {
+        "iupe"} | coming
+    assert list(report.TABLE1_METHODS) == ["bc", "bco", "bco-alpha", "abco", "iupe", "ilpo",
+                                           "gaifo"]  # fmt: skip
+    assert set(report.ORDER) == set(report.TABLE1_METHODS) | set(report.TABLE2_METHODS)
+
+
+def test_published_aer_of_iupe_and_ilpo() -> None:
+    assert paper.PUBLISHED_AER["iupe"] == {
+        "CartPole-v1": 500.0, "Acrobot-v1": -78.1, "MountainCar-v0": -130.7,
+        "AbcoMaze3x3-v0": 0.927, "AbcoMaze5x5-v0": 0.971, "AbcoMaze10x10-v0": 0.981}
+    assert paper.PUBLISHED_AER["ilpo"] == {
+        "CartPole-v1": 500.0, "Acrobot-v1": -85.3, "MountainCar-v0": -167.0,
+        "AbcoMaze3x3-v0": -0.026, "AbcoMaze5x5-v0": -0.059, "AbcoMaze10x10-v0": -0.020}
+    assert paper.published("ilpo", "AbcoMaze10x10-v0") == (None, -0.020)
+    assert paper.published("gaifo", "Acrobot-v1") is None
+    assert report.GOALS["published_aer"] is paper.PUBLISHED_AER
+    assert report.GOALS["wall_s"] == 4 * 3600.0  # the seven-method grid
