@@ -4,6 +4,7 @@ determinism, verification, and the view of their first K layouts."""
 import hashlib
 import json
 
+import h5py
 import numpy as np
 import pytest
 
@@ -180,3 +181,12 @@ def test_cli_list_and_info(pre5, capsys):
     assert "layouts:     3 (the first, of 20)" in out and "episodes:    6" in out
     assert cli.main(["info", str(pre5), "--layouts", "30"]) == cli.EXIT_BAD_INPUT
     assert "layouts=30 is out of range" in capsys.readouterr().err
+
+
+def test_verify_checks_layouts_against_the_procedural_split(tmp_path):
+    path = _small(IDS[0], tmp_path, layouts=4)
+    with h5py.File(path, "r+") as f:  # episode 0 now claims procedural layout 1
+        f["episodes/layout_index"][0] = 1
+    with pytest.raises(abco_data.CorruptDatasetError,
+                       match="episode 0's layout is not layout 1 of the procedural split"):
+        abco_data.verify(path, sha256=abco_data.sha256_of(path))
