@@ -18,13 +18,16 @@ from abco_envs.maze.procedural import procedural_ids
 
 LAYOUTS = 20
 SMALL = {"layouts": LAYOUTS, "reference_episodes": 2}
-IDS = ("abco/maze5x5-procedural-expert-v0", "abco/maze5x5-procedural-pre-v0",
-       "abco/maze10x10-procedural-expert-v0", "abco/maze10x10-procedural-pre-v0")
+IDS = (
+    "abco/maze5x5-procedural-expert-v0",
+    "abco/maze5x5-procedural-pre-v0",
+    "abco/maze10x10-procedural-expert-v0",
+    "abco/maze10x10-procedural-pre-v0",
+)
 
 
 def _small(dataset_id, directory, name="p.hdf5", **extra):
-    return abco_data.generate(dataset_id, directory / name, progress=False,
-                              **{**SMALL, **extra})
+    return abco_data.generate(dataset_id, directory / name, progress=False, **{**SMALL, **extra})
 
 
 def _sha(path):
@@ -119,8 +122,7 @@ def test_first_layouts_is_a_prefix(pre5):
 
 
 def test_first_layouts_equals_generating_fewer_layouts(tmp_path, pre5):
-    fewer = abco_data.open_dataset(_small("abco/maze5x5-procedural-pre-v0", tmp_path,
-                                          layouts=5))
+    fewer = abco_data.open_dataset(_small("abco/maze5x5-procedural-pre-v0", tmp_path, layouts=5))
     view = abco_data.open_dataset(pre5).first_layouts(5)
     a, b = view.load_arrays(), fewer.load_arrays()
     for name, value in vars(a).items():
@@ -138,12 +140,14 @@ def test_first_layouts_torch_view(pre5):
 
 @pytest.mark.parametrize(
     ("k", "match"),
-    [(0, "layouts=0 is out of range: .* has 20 layouts; take from 1 to 20"),
-     (21, "layouts=21 is out of range"),
-     (-3, "layouts=-3 is out of range"),
-     (2.5, "must be an integer from 1 to 20, got float"),
-     (True, "must be an integer from 1 to 20, got bool"),
-     ("3", "must be an integer from 1 to 20, got str")],
+    [
+        (0, "layouts=0 is out of range: .* has 20 layouts; take from 1 to 20"),
+        (21, "layouts=21 is out of range"),
+        (-3, "layouts=-3 is out of range"),
+        (2.5, "must be an integer from 1 to 20, got float"),
+        (True, "must be an integer from 1 to 20, got bool"),
+        ("3", "must be an integer from 1 to 20, got str"),
+    ],
 )
 def test_bad_layout_counts_are_named(pre5, k, match):
     with pytest.raises(ValueError, match=match):
@@ -151,16 +155,21 @@ def test_bad_layout_counts_are_named(pre5, k, match):
 
 
 def test_first_layouts_needs_a_maze(tmp_path):
-    path = abco_data.generate("abco/mountaincar-pre-v0", tmp_path / "m.hdf5", progress=False,
-                              transitions=30, reference_episodes=1, reference_expert_episodes=1)
+    path = abco_data.generate(
+        "abco/mountaincar-pre-v0",
+        tmp_path / "m.hdf5",
+        progress=False,
+        transitions=30,
+        reference_episodes=1,
+        reference_expert_episodes=1,
+    )
     with pytest.raises(WrongKindError, match="has no maze layouts"):
         abco_data.open_dataset(path).first_layouts(1)
 
 
 def test_load_takes_the_first_layouts(pre5, monkeypatch):
     fetched = []
-    monkeypatch.setattr(hub, "fetch", lambda dataset_id, **kw: fetched.append(dataset_id)
-                        or pre5)
+    monkeypatch.setattr(hub, "fetch", lambda dataset_id, **kw: fetched.append(dataset_id) or pre5)
     ds = hub.load(IDS[1], layouts=4, progress=False)
     assert ds.layouts_taken == 4 and ds.num_episodes == 8 and fetched == [IDS[1]]
     # A count beyond the registry's is refused before anything is fetched or generated.
@@ -187,6 +196,8 @@ def test_verify_checks_layouts_against_the_procedural_split(tmp_path):
     path = _small(IDS[0], tmp_path, layouts=4)
     with h5py.File(path, "r+") as f:  # episode 0 now claims procedural layout 1
         f["episodes/layout_index"][0] = 1
-    with pytest.raises(abco_data.CorruptDatasetError,
-                       match="episode 0's layout is not layout 1 of the procedural split"):
+    with pytest.raises(
+        abco_data.CorruptDatasetError,
+        match="episode 0's layout is not layout 1 of the procedural split",
+    ):
         abco_data.verify(path, sha256=abco_data.sha256_of(path))

@@ -124,22 +124,28 @@ def test_fresh_env_draws_fresh_layouts_from_its_seed():
 
 
 def test_vector_env_slots_are_the_fresh_layouts_of_their_seeds():
-    envs = gym.make_vec("AbcoMaze5x5-v0", num_envs=4, split="fresh",
-                        vectorization_mode="vector_entry_point")
+    envs = gym.make_vec(
+        "AbcoMaze5x5-v0", num_envs=4, split="fresh", vectorization_mode="vector_entry_point"
+    )
     _, info = envs.reset(seed=50)
     assert np.array_equal(envs.unwrapped.cells, fresh_layouts(5, 4, seed=50))
     assert info["layout_index"].tolist() == [-1] * 4
 
 
-@pytest.mark.parametrize(("split", "options"),
-                         [("fresh", None), ("procedural", {"layout_index": [3, 1, 4, 1]})])
+@pytest.mark.parametrize(
+    ("split", "options"), [("fresh", None), ("procedural", {"layout_index": [3, 1, 4, 1]})]
+)
 def test_vector_env_equals_sync_on_the_new_splits(split, options, small_procedural_split):
     kwargs = {"num_envs": 4, "max_episode_steps": 15, "split": split}
     sync = gym.make_vec("AbcoMaze5x5-v0", vectorization_mode="sync", **kwargs)
     native = gym.make_vec("AbcoMaze5x5-v0", vectorization_mode="vector_entry_point", **kwargs)
     if options is not None:  # SyncVectorEnv passes one options dict to every env
-        oa = np.stack([sync.envs[i].reset(seed=9 + i, options={"layout_index": k})[0]
-                       for i, k in enumerate(options["layout_index"])])
+        oa = np.stack(
+            [
+                sync.envs[i].reset(seed=9 + i, options={"layout_index": k})[0]
+                for i, k in enumerate(options["layout_index"])
+            ]
+        )
     else:
         oa, _ = sync.reset(seed=9)
     ob, _ = native.reset(seed=9, options=options)
@@ -153,8 +159,7 @@ def test_vector_env_equals_sync_on_the_new_splits(split, options, small_procedur
         assert np.array_equal(a[4]["layout_id"], b[4]["layout_id"])
 
 
-@pytest.mark.parametrize(("env_id", "split", "least"),
-                         [("AbcoMaze3x3-v0", "procedural", 4)])
+@pytest.mark.parametrize(("env_id", "split", "least"), [("AbcoMaze3x3-v0", "procedural", 4)])
 def test_small_grids_refuse_the_new_splits(env_id, split, least):
     with pytest.raises(InvalidOptionError, match=f"needs a maze of at least {least}x{least}"):
         gym.make(env_id, split=split)
