@@ -1,15 +1,17 @@
 """abco_data: the datasets of the ABCO paper as verified, deterministic HDF5 files.
 
-Fifteen datasets (expert states and random-policy pre-demonstrations for six environments,
-and the mazes' start-cell pre-demonstrations of the authors' regime), each one HDF5 file in
-the versioned format of ``docs/format.md``. :func:`load` gets one from the cache, the Hugging
-Face Hub, or local generation; :func:`open_dataset` reads a file; :func:`verify` and
-:func:`check_dataset` check every byte of one. ``import abco_data`` does not import torch.
+Nineteen datasets (expert states and random-policy pre-demonstrations for six environments,
+the mazes' start-cell pre-demonstrations of the authors' regime, and expert and
+pre-demonstration sets over the 10,000 procedural layouts of the 5x5 and 10x10 mazes), each
+one HDF5 file in the versioned format of ``docs/format.md``. :func:`load` gets one from the
+cache, the Hugging Face Hub, or local generation; :func:`open_dataset` reads a file;
+:func:`verify` and :func:`check_dataset` check every byte of one. ``import abco_data`` does
+not import torch.
 
 Example:
     >>> import abco_data
     >>> len(abco_data.DATASET_IDS)
-    15
+    19
     >>> abco_data.dataset_id("CartPole-v1", "pre_demonstrations")
     'abco/cartpole-pre-v0'
 """

@@ -61,13 +61,14 @@ def _cmd_list(args: argparse.Namespace) -> int:
     from abco_data.registry import DATASET_IDS, spec
 
     home = Path(args.cache_dir) if args.cache_dir else data_home()
-    print(f"{'id':<28} {'env':<18} {'kind':<19} {'published':>12}  cached")
+    width = max(map(len, DATASET_IDS))
+    print(f"{'id':<{width}} {'env':<18} {'kind':<19} {'published':>12}  cached")
     for ds_id in DATASET_IDS:
         s = spec(ds_id)
         entry = _manifest_entry(ds_id)
         size = f"{entry.size / 1e6:.1f} MB" if entry is not None else "-"
         cached = "yes" if (home / s.filename).is_file() else "no"
-        print(f"{ds_id:<28} {s.env_id:<18} {s.kind:<19} {size:>12}  {cached}")
+        print(f"{ds_id:<{width}} {s.env_id:<18} {s.kind:<19} {size:>12}  {cached}")
     return 0
 
 
@@ -88,9 +89,17 @@ def _cmd_info(args: argparse.Namespace) -> int:
         if entry is not None:
             print(f"published:   {entry.size} bytes, sha256 {entry.sha256}")
     if path.is_file():
-        ds = open_dataset(path)
+        ds = whole = open_dataset(path)
+        if args.layouts is not None:
+            try:
+                ds = whole.first_layouts(args.layouts)
+            except ValueError as err:
+                raise UsageError(str(err)) from err
         ref = ds.reference
         print(f"file:        {path}\ndataset id:  {ds.id}")
+        if ds.is_maze:
+            taken = "" if ds is whole else f" (the first, of {whole.num_layouts})"
+            print(f"layouts:     {ds.num_layouts}{taken}")
         print(f"episodes:    {ds.num_episodes}\ntransitions: {ds.num_transitions}")
         print(f"observation: {ds.observation_space}\naction:      {ds.action_space}")
         palette = ds.observation_palette
@@ -99,6 +108,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
         print(f"reference:   expert {ref.expert_mean:.4f}, random {ref.random_mean:.4f}"
               + (f" ({len(ref.layout_ids)} layouts)" if ref.layout_ids else ""))
         ds.close()
+        whole.close()
     else:
         print(f"file:        not cached ({path})")
     return 0
@@ -176,6 +186,8 @@ def _add_actions(sub: Any) -> None:
     p = sub.add_parser("info", help="show a dataset's parameters and, if cached, its contents")
     p.add_argument("id", help="dataset id (or the path of a dataset file)")
     p.add_argument("--cache-dir")
+    p.add_argument("--layouts", type=int, metavar="K",
+                   help="mazes: count the episodes and transitions of the first K layouts only")
     p.set_defaults(func=_cmd_info)
     p = sub.add_parser("generate", help="generate a dataset locally (deterministic bytes)")
     p.add_argument("id")

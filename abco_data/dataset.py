@@ -3,10 +3,15 @@
 A transition ``k`` pairs observation rows ``obs_t[k]`` and ``obs_t[k] + 1`` of the flat
 ``observations`` column; both always lie in the same episode (each episode stores its ``T + 1``
 observations, the final one included).
+
+A maze dataset's episodes come grouped by layout, layouts in their split's order, so
+:meth:`Dataset.first_layouts` can give a view of the first ``K`` layouts: a prefix of every
+column, which its readers read and nothing beyond.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -30,6 +35,7 @@ from abco_data.format import (
     ObservationReader,
     action_column,
     episode_column,
+    expected_rows,
     hdf5_errors,
     open_h5,
 )
@@ -37,7 +43,7 @@ from abco_data.header import read_header, read_whole_column
 from abco_data.reference import ReferenceReturns
 from abco_data.values import check_values
 
-__all__ = ["Dataset", "Episode", "DatasetArrays", "open_dataset"]
+__all__ = ["Dataset", "Episode", "DatasetArrays", "open_dataset", "check_layout_count"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,6 +128,9 @@ class Dataset:
         observation_space: The env's observation space.
         action_space: The env's action space.
         reference: Reference returns for Performance ``P``.
+        layouts_taken: ``K`` for a view of the first ``K`` layouts
+            (:meth:`first_layouts`), whose counts and readers cover those layouts' episodes
+            only; ``None`` for the whole file. ``attrs`` are the whole file's either way.
     """
 
     path: Path
@@ -134,6 +143,7 @@ class Dataset:
     observation_space: spaces.Space[Any]
     action_space: spaces.Space[Any]
     reference: ReferenceReturns
+    layouts_taken: int | None = None
     _index: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
     _h5: LazyH5File = field(default=None, repr=False)  # type: ignore[assignment]
 
@@ -174,10 +184,77 @@ class Dataset:
         if not self._index:
             f = self._file()
             with hdf5_errors(self.path, "episode offsets"):
-                index = {key: read_whole_column(f[episode_column(key)], self.path)
+                index = {key: read_whole_column(f[episode_column(key)], self.path,
+                                                self.num_episodes)
                          for key in EPISODE_COLUMNS}
             self._index.update(index)
         return self._index
+
+    # -- layouts ------------------------------------------------------------------------------
+
+    def _layout_groups(self) -> np.ndarray:
+        """First episode of each layout's run of episodes (mazes), checked to be grouped."""
+        if not self.is_maze:
+            raise WrongKindError(f"{self.path}: {self.id} holds {self.env_id} data, which has"
+                                 " no maze layouts")
+        if not self.num_episodes:
+            return np.zeros(0, dtype=np.int64)
+        with hdf5_errors(self.path, "column episodes/layout_index"):
+            order = read_whole_column(self._file()[episode_column("layout_index")], self.path,
+                                      self.num_episodes)
+        starts = np.flatnonzero(np.concatenate([[True], order[1:] != order[:-1]]))
+        if len(np.unique(order[starts])) != len(starts):
+            raise CorruptDatasetError(f"{self.path}: episodes are not grouped by layout (a"
+                                      " layout index comes back after another one)")
+        return starts
+
+    @property
+    def num_layouts(self) -> int:
+        """Distinct layouts of a maze dataset (of this view).
+
+        Raises:
+            WrongKindError: Not a maze dataset.
+        """
+        return len(self._layout_groups())
+
+    def first_layouts(self, k: int) -> Dataset:
+        """A view of the episodes of the first ``k`` layouts of this maze dataset.
+
+        Layouts count in file order (the split's order: layout ``j`` of the procedural
+        datasets is ``procedural_layouts(n, K)[j]``). The view's episodes, transitions and
+        observations are a prefix of the file's; ``load_arrays``, ``episodes``,
+        ``read_transitions``, ``sample_by_action``, ``torch_dataset`` and
+        :func:`~abco_data.check_dataset` see that prefix only, and read nothing beyond it.
+
+        Args:
+            k: How many layouts, from 1 to :attr:`num_layouts`.
+
+        Returns:
+            A new :class:`Dataset` of the same file (``layouts_taken == k``).
+
+        Raises:
+            ValueError: ``k`` is not an integer from 1 to :attr:`num_layouts`.
+            WrongKindError: Not a maze dataset.
+            CorruptDatasetError: Episodes not grouped by layout.
+
+        Example:
+            >>> import tempfile, os, abco_data
+            >>> path = abco_data.generate("abco/maze5x5-procedural-expert-v0", os.path.join(
+            ...     tempfile.mkdtemp(), "p.hdf5"), progress=False, layouts=4,
+            ...     reference_episodes=1)
+            >>> ds = abco_data.open_dataset(path)
+            >>> ds.num_layouts, ds.first_layouts(2).num_episodes
+            (4, 2)
+            >>> ds.first_layouts(5)  # doctest: +ELLIPSIS
+            Traceback (most recent call last):
+            ValueError: ...: layouts=5 is out of range: abco/maze5x5-procedural-expert-v0 has 4 layouts; take from 1 to 4
+        """  # noqa: E501
+        starts = self._layout_groups()
+        check_layout_count(k, len(starts), f"{self.path}: layouts={k!r}", self.id)
+        n_ep = int(starts[k]) if k < len(starts) else self.num_episodes
+        n_tr = int(self._episode_index()["length"][:n_ep].sum())
+        return dataclasses.replace(self, num_episodes=n_ep, num_transitions=n_tr,
+                                   layouts_taken=int(k), _index={}, _h5=None)
 
     # -- episodes -----------------------------------------------------------------------------
 
@@ -226,10 +303,13 @@ class Dataset:
         """
         f = self._file()
         reader = self._observations()
+        rows = expected_rows(self.kind, self.num_episodes, self.num_transitions,
+                             maze=POSITIONS in f)  # a view's prefix, or every row
         with hdf5_errors(self.path, "columns"):
-            cols = {name: (read_whole_column(f[col], self.path) if col in f else None)
-                    for name, col in _ARRAY_COLUMNS.items()}
-        obs = self._read_obs(0, len(reader), np.empty(reader.shape, dtype=reader.dtype))
+            cols = {name: read_whole_column(f[col], self.path, rows.get(col))
+                    if col in f else None for name, col in _ARRAY_COLUMNS.items()}
+        n_obs = self.num_transitions + self.num_episodes
+        obs = self._read_obs(0, n_obs, np.empty((n_obs, *reader.shape[1:]), dtype=reader.dtype))
         arrays = DatasetArrays(observations=obs, **cols)
         check_values(arrays, action_count=self.action_space.n, path=self.path,
                      observation_space=self.observation_space)
@@ -279,7 +359,8 @@ class Dataset:
                 f"{self.path}: expert data has no training actions; its idm_eval_actions are"
                 " for measuring IDM accuracy only (pass idm_eval=True to read them)")
         with hdf5_errors(self.path, f"column {self.action_column}"):
-            actions = read_whole_column(self._file()[self.action_column], self.path)
+            actions = read_whole_column(self._file()[self.action_column], self.path,
+                                        self.num_transitions)
         if len(actions) and (actions.min() < 0 or actions.max() >= self.action_space.n):
             raise CorruptDatasetError(f"{self.path}: {self.action_column} outside the action"
                                       f" space {self.action_space}")
@@ -320,6 +401,21 @@ class Dataset:
         from abco_data.torch_view import TransitionDataset
 
         return TransitionDataset(self, in_memory=in_memory, **kwargs)
+
+
+def check_layout_count(k: object, available: int, what: str, dataset_id: str) -> int:
+    """``k`` as an int from 1 to ``available`` (the layouts of ``dataset_id``).
+
+    Raises:
+        ValueError: Anything else; the message starts with ``what``.
+    """
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)):
+        raise ValueError(f"{what}: the number of layouts must be an integer from 1 to"
+                         f" {available}, got {type(k).__name__}")
+    if not 1 <= k <= available:
+        raise ValueError(f"{what} is out of range: {dataset_id} has {available} layouts; take"
+                         f" from 1 to {available}")
+    return int(k)
 
 
 def _episode_arrays(ep: Episode, action_column: str) -> DatasetArrays:

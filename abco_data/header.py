@@ -53,12 +53,17 @@ class Header:
     reference: ReferenceReturns
 
 
-def read_whole_column(ds: h5py.Dataset, path: Path) -> np.ndarray:
-    """Read a whole column into one fresh array (a single allocation)."""
+def read_whole_column(ds: h5py.Dataset, path: Path, rows: int | None = None) -> np.ndarray:
+    """Read a whole column, or its first ``rows`` rows, into one fresh array."""
     with hdf5_errors(path, f"column {ds.name}"):
-        out = np.empty(ds.shape, dtype=ds.dtype)
-        if out.size:
-            read_column(ds, out)
+        if rows is None or rows >= len(ds):
+            out = np.empty(ds.shape, dtype=ds.dtype)
+            if out.size:
+                read_column(ds, out)
+        else:
+            out = np.empty((rows, *ds.shape[1:]), dtype=ds.dtype)
+            if out.size:
+                ds.read_direct(out, np.s_[0:rows], np.s_[0:rows])
     return out
 
 

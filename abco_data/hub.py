@@ -49,8 +49,13 @@ from huggingface_hub import constants, hf_hub_download, try_to_load_from_cache
 from huggingface_hub.errors import EntryNotFoundError, HfHubHTTPError, OfflineModeIsEnabled
 from huggingface_hub.utils import httpx, silent_tqdm
 
-from abco_data.dataset import Dataset, open_dataset
-from abco_data.errors import ChecksumError, DatasetNotAvailableError, DatasetWriteError
+from abco_data.dataset import Dataset, check_layout_count, open_dataset
+from abco_data.errors import (
+    ChecksumError,
+    DatasetNotAvailableError,
+    DatasetWriteError,
+    WrongKindError,
+)
 from abco_data.files import atomic_target, file_digest, remove_path, remove_stale_temporaries
 from abco_data.generate import generate
 from abco_data.manifest import (
@@ -66,6 +71,7 @@ from abco_data.manifest import (
     read_manifest,
     verify_file,
 )
+from abco_data.registry import spec
 
 __all__ = [
     "DEFAULT_REPO_ID",
@@ -288,7 +294,8 @@ def fetch(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
 
 def load(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
          revision: str | None = None, offline: bool | None = None, progress: bool = True,
-         manifest: Manifest | str | os.PathLike[str] | None = None) -> Dataset:
+         manifest: Manifest | str | os.PathLike[str] | None = None,
+         layouts: int | None = None) -> Dataset:
     """Return a dataset from the cache, else the Hub, else local generation.
 
     Args:
@@ -301,6 +308,8 @@ def load(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
         progress: Show download and generation progress bars.
         manifest: A manifest or the path of one; default ``$ABCO_DATA_MANIFEST`` or the shipped
             ``abco_data/manifest.json``.
+        layouts: Maze datasets: keep the episodes of the first ``layouts`` layouts only
+            (:meth:`~abco_data.Dataset.first_layouts`); the whole file is fetched and checked.
 
     Returns:
         The opened dataset (:func:`abco_data.open_dataset` of the cached file).
@@ -309,9 +318,20 @@ def load(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
         UnknownDatasetError: Unknown id (the message lists the known ones).
         ChecksumError: The locally generated file differs from the manifest entry.
         DatasetNotAvailableError: No source could provide the dataset.
+        ValueError: ``layouts`` is not an integer from 1 to the dataset's layouts (checked
+            against the registry before anything is fetched, then against the file).
+        WrongKindError: ``layouts`` for a dataset without maze layouts.
     """
-    return open_dataset(fetch(dataset_id, cache_dir=cache_dir, revision=revision,
-                              offline=offline, progress=progress, manifest=manifest))
+    if layouts is not None:  # a bad count fails now, not after minutes of generation
+        wanted = spec(dataset_id)
+        if not wanted.is_maze:
+            raise WrongKindError(f"{dataset_id} holds {wanted.env_id} data, which has no maze"
+                                 f" layouts to take the first {layouts!r} of")
+        check_layout_count(layouts, wanted.params["layouts"], f"layouts={layouts!r}",
+                           dataset_id)
+    ds = open_dataset(fetch(dataset_id, cache_dir=cache_dir, revision=revision,
+                            offline=offline, progress=progress, manifest=manifest))
+    return ds if layouts is None else ds.first_layouts(layouts)
 
 
 def download(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,

@@ -2,7 +2,10 @@
 
 Ids read ``abco/{name}-{kind}-v0``: ``name`` is one of the six environments, ``kind`` is
 ``expert`` or ``pre`` (pre-demonstrations), and the trailing version changes whenever the
-bytes of a dataset would.
+bytes of a dataset would. Two families more, for the mazes: ``abco/{maze}-pre-start-v0`` (the
+authors' start-cell pre-demonstrations) and, for 5x5 and 10x10,
+``abco/{maze}-procedural-{kind}-v0``: 10,000 layouts of the procedural split
+(:mod:`abco_envs.maze.procedural`), disjoint from the pool's train and test splits.
 
 Example:
     >>> dataset_id("AbcoMaze5x5-v0", "expert")
@@ -21,9 +24,10 @@ from typing import Any
 
 import abco_envs
 from abco_data.errors import UnknownDatasetError
+from abco_envs.maze.procedural import PROCEDURAL_SPLIT_SIZE
 
-__all__ = ["DatasetSpec", "DATASET_IDS", "ENV_NAMES", "ACTION_COUNTS", "dataset_id", "spec",
-           "is_maze"]
+__all__ = ["DatasetSpec", "DATASET_IDS", "ENV_NAMES", "ACTION_COUNTS", "PROCEDURAL_ENVS",
+           "DATASET_SPLITS", "dataset_id", "procedural_dataset_id", "spec", "is_maze"]
 
 #: Short dataset name of each environment id.
 ENV_NAMES = {
@@ -60,6 +64,24 @@ _MAZE_PRE = {
 #: datasets only, so the older datasets' stored parameters (and bytes) stay as they were.
 _MAZE_PRE_START = {**_MAZE_PRE, "episodes_per_layout": 40, "drop_wall_hits": True,
                    "from_start_cell": True}
+#: The procedural datasets: every layout of the procedural split, each layout's episodes
+#: together and layouts in split order, so the first ``K`` layouts are a prefix of the file
+#: (``Dataset.first_layouts``). One shortest path per layout: a layout's expert paths share
+#: most of their cells, and another layout teaches more than another path through the same
+#: one. Two random walks of at most 10 steps per layout (the standard ``-pre-`` walks, wall
+#: hits kept): about 19 transitions a layout, so the first 1,000 layouts hold as many as the
+#: standard 100-layout ``-pre-`` dataset, and all 10,000 about as many as the expert file;
+#: the trainer decodes whole files into memory (12 KiB a 64x64 frame), which 20 walks a
+#: layout would take past 25 GB on 10x10.
+_MAZE_PROCEDURAL_EXPERT = {**_MAZE_EXPERT, "layouts": PROCEDURAL_SPLIT_SIZE,
+                           "solutions_per_layout": 1, "split": "procedural"}
+_MAZE_PROCEDURAL_PRE = {**_MAZE_PRE, "layouts": PROCEDURAL_SPLIT_SIZE, "episodes_per_layout": 2,
+                        "split": "procedural"}
+#: The maze sizes with procedural datasets (the issue's two; 3x3 has no procedural split).
+PROCEDURAL_ENVS = ("AbcoMaze5x5-v0", "AbcoMaze10x10-v0")
+#: Layout splits a dataset may be made from (``split`` creation parameter; absent: train).
+#: Never ``test`` or ``fresh``: those layouts stay out of every dataset.
+DATASET_SPLITS = ("train", "procedural")
 _CLASSIC_EXPERT = {"episodes": 50, "reference_episodes": 100, "reference_expert_episodes": 20}
 _CLASSIC_PRE = {"transitions": 50_000, "reference_episodes": 100,
                 "reference_expert_episodes": 20}
@@ -95,13 +117,17 @@ class DatasetSpec:
         """A copy whose parameters are updated by ``overrides`` (only known keys).
 
         Raises:
-            TypeError: An override that this dataset has no parameter for.
+            TypeError: An override that this dataset has no parameter for, or one of
+                ``split`` (a dataset's layout split is part of its id).
         """
         unknown = sorted(set(overrides) - set(self.params))
         if unknown:
             raise TypeError(
                 f"{self.id} has no parameter(s) {', '.join(unknown)};"
                 f" known: {', '.join(sorted(self.params))}")
+        if "split" in overrides:
+            raise TypeError(f"{self.id}: parameter split cannot be overridden (the layout split"
+                            " of a dataset is part of its id)")
         return DatasetSpec(self.id, self.env_id, self.kind,
                            MappingProxyType({**self.params, **overrides}))
 
@@ -135,6 +161,25 @@ def dataset_id(env_id: str, kind: str) -> str:
     return f"abco/{name}-{_KIND_SUFFIX[_normalise_kind(kind)]}-v{VERSION}"
 
 
+def procedural_dataset_id(env_id: str, kind: str) -> str:
+    """The id of the procedural ``kind`` dataset of ``env_id`` (mazes 5x5 and 10x10).
+
+    Example:
+        >>> procedural_dataset_id("AbcoMaze10x10-v0", "pre")
+        'abco/maze10x10-procedural-pre-v0'
+
+    Raises:
+        UnknownDatasetError: No procedural dataset exists for ``env_id``.
+        ValueError: Unknown ``kind``.
+    """
+    name = abco_envs.env_name(env_id)
+    if name not in PROCEDURAL_ENVS:
+        raise UnknownDatasetError(f"no procedural abco dataset for env {env_id!r}; envs with"
+                                  f" procedural datasets: {', '.join(PROCEDURAL_ENVS)}")
+    suffix = _KIND_SUFFIX[_normalise_kind(kind)]
+    return f"abco/{ENV_NAMES[name]}-procedural-{suffix}-v{VERSION}"
+
+
 def _build() -> dict[str, DatasetSpec]:
     specs = {}
     for i, (env_id, _name) in enumerate(ENV_NAMES.items()):
@@ -152,12 +197,20 @@ def _build() -> dict[str, DatasetSpec]:
         params = {**_MAZE_PRE_START, "seed": (2 * len(ENV_NAMES) + k + 1) * 1_000_000}
         ds_id = f"abco/{name}-pre-start-v{VERSION}"
         specs[ds_id] = DatasetSpec(ds_id, env_id, "pre_demonstrations", MappingProxyType(params))
+    first = 2 * len(ENV_NAMES) + 3 + 1  # after the three start-cell datasets
+    for k, (env_id, kind) in enumerate((e, kind) for e in PROCEDURAL_ENVS
+                                       for kind in ("expert", "pre_demonstrations")):
+        base = _MAZE_PROCEDURAL_EXPERT if kind == "expert" else _MAZE_PROCEDURAL_PRE
+        params = {**base, "seed": (first + k) * 1_000_000}
+        ds_id = procedural_dataset_id(env_id, kind)
+        specs[ds_id] = DatasetSpec(ds_id, env_id, kind, MappingProxyType(params))
     return specs
 
 
 _SPECS = _build()
 #: The dataset ids: the twelve of Table 1 (mazes first, expert before pre-demonstrations),
-#: then the mazes' start-cell pre-demonstrations of the authors' regime.
+#: then the mazes' start-cell pre-demonstrations of the authors' regime, then the procedural
+#: datasets (5x5 expert and pre, 10x10 expert and pre).
 DATASET_IDS: tuple[str, ...] = tuple(_SPECS)
 
 

@@ -13,6 +13,7 @@ child process with a time limit.
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -26,7 +27,9 @@ from abco_data.child import run_in_child
 from abco_data.dataset import Dataset, DatasetArrays, open_dataset
 from abco_data.errors import ChecksumError, CorruptDatasetError, WrongKindError
 from abco_data.files import file_digest, sha256_of
+from abco_data.generate import layout_split
 from abco_data.manifest import Manifest, as_manifest, cached_path, known_ids
+from abco_envs.maze.procedural import PROCEDURAL_SPLIT_SIZE
 
 __all__ = ["VerifyReport", "check_dataset", "verify", "sha256_of"]
 
@@ -58,19 +61,41 @@ class VerifyReport:
     checksum: str = ""
 
 
+def _split_ids(a: DatasetArrays, ds: Dataset, path: Path) -> tuple[tuple[str, ...], str]:
+    """The structural ids that ``layout_index`` indexes, and what they are, for messages."""
+    from abco_envs.maze.procedural import procedural_ids
+
+    try:
+        split = layout_split(json.loads(ds.attrs["creation_params"]))
+    except (TypeError, ValueError, AttributeError) as err:  # the file's JSON and its claims
+        raise CorruptDatasetError(f"{path}: creation_params name no layout split a dataset"
+                                  f" can be made from: {err}") from err
+    if split == "procedural":
+        count = int(a.layout_indices.max()) + 1 if len(a.layout_indices) else 0
+        if count > PROCEDURAL_SPLIT_SIZE:
+            raise CorruptDatasetError(f"{path}: layout index {count - 1} is beyond the"
+                                      f" {PROCEDURAL_SPLIT_SIZE} layouts of the procedural split")
+        return procedural_ids(a.layouts.shape[1], count), "the procedural split"
+    ref = ds.reference
+    # Only the train split's layouts: a test layout in a dataset would leak the held-out set.
+    train = tuple(i for i, split in zip(ref.layout_ids or (), ref.layout_splits or ())
+                  if split == "train")
+    return train, "the train split"
+
+
 def _check_maze(a: DatasetArrays, ds: Dataset, path: Path) -> int:
-    """Moves follow the walls, layouts are the reference's, every frame re-renders.
+    """Moves follow the walls, layouts are their split's, every frame re-renders.
 
     Returns the number of frames re-rendered.
     """
     from abco_envs.maze.layout import DELTAS, OPEN_BITS, layout_hash
     from abco_envs.maze.render import MazeRenderer
 
-    ids = ds.reference.layout_ids or ()
+    ids, where = _split_ids(a, ds, path)
     for e, (layout, k) in enumerate(zip(a.layouts, a.layout_indices)):
         if k >= len(ids) or layout_hash(layout) != ids[k]:
-            raise CorruptDatasetError(f"{path}: episode {e}'s layout is not layout {k} of the"
-                                      " reference layouts")
+            raise CorruptDatasetError(f"{path}: episode {e}'s layout is not layout {k} of"
+                                      f" {where}")
     episode_of_row = np.repeat(np.arange(len(a.episode_lengths)), a.episode_lengths + 1)
     obs_t, _ = ds.transition_index()
     actions = a.actions if a.actions is not None else a.idm_eval_actions

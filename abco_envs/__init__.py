@@ -22,7 +22,14 @@ from abco_envs.errors import (
     UnknownEnvError,
 )
 from abco_envs.ids import CLASSIC_IDS, MAZE_IDS, MAZE_SIZES, env_name, is_maze, maze_size
-from abco_envs.maze import Action, MazeEnv, MazeVectorEnv, layout_pool
+from abco_envs.maze import (
+    Action,
+    MazeEnv,
+    MazeVectorEnv,
+    fresh_layouts,
+    layout_pool,
+    procedural_layouts,
+)
 from abco_envs.maze.rules import MAX_EPISODE_STEPS
 
 __version__ = "0.1.0"
@@ -50,7 +57,9 @@ __all__ = [
     "OptionOutOfRangeError",
     "UnknownEnvError",
     "env_name",
+    "fresh_layouts",
     "is_maze",
     "layout_pool",
     "maze_size",
+    "procedural_layouts",
 ]

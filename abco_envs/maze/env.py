@@ -41,7 +41,9 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
     marked red. Layouts are spanning-tree mazes with about 20% of cells given one extra opening
     (so there are loops and often several shortest paths). By default each ``reset`` draws one
     of the 100 layouts of the canonical ``train`` split; ``split="test"`` uses the held-out
-    ones and ``split="procedural"`` generates a fresh layout from the env's ``np_random``.
+    ones, ``split="procedural"`` the 10,000 layouts of the procedural split (those of the
+    procedural datasets) and ``split="fresh"`` draws a fresh layout from the env's
+    ``np_random``, one in no split and no dataset (see :mod:`abco_envs.maze.procedural`).
 
     ## Action Space
     ``Discrete(4)``: 0 = N (up), 1 = S (down), 2 = E (right), 3 = W (left), as
@@ -69,14 +71,14 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
 
     ## Reset Options
     ``layout``: an explicit ``(n, n)`` layout in gym-maze's encoding (validated);
-    ``layout_index``: integer index into the env's split (not for ``split="procedural"``);
+    ``layout_index``: integer index into the env's split (not for ``split="fresh"``);
     ``start``: ``(row, col)`` start cell, integers, inside the maze and not the goal. Other
     keys, non-dict options and bad values raise :class:`~abco_envs.errors.InvalidOptionError`
     (:class:`~abco_envs.errors.OptionOutOfRangeError` for an index or cell out of range).
 
     ## Info
     ``position`` (int64 array ``[row, col]``), ``layout_id`` (structural hash) and, after reset,
-    ``layout_index`` (-1 for an explicit or procedural layout).
+    ``layout_index`` (-1 for an explicit or fresh layout).
 
     ## Registered Configurations
     ``AbcoMaze3x3-v0``, ``AbcoMaze5x5-v0``, ``AbcoMaze10x10-v0`` (``size`` 3, 5, 10).

@@ -29,6 +29,7 @@ import numpy as np
 from abco_envs.errors import InvalidActionError, InvalidOptionError, OptionOutOfRangeError
 from abco_envs.maze.observation import OBS_TYPES
 from abco_envs.maze.pool import SPLITS
+from abco_envs.maze.procedural import MIN_FRESH_SIZE, MIN_PROCEDURAL_SIZE
 from abco_envs.maze.rules import START_POSITION, Action, goal_position
 
 __all__ = [
@@ -45,8 +46,11 @@ __all__ = [
     "resolve_image_size",
 ]
 
-#: The values of the ``split`` argument: the pool's splits, or fresh layouts.
-LAYOUT_SOURCES = (*SPLITS, "procedural")
+#: The values of the ``split`` argument: the pool's splits, the procedural split (the
+#: procedural datasets' layouts), or fresh layouts (in no split and no dataset).
+LAYOUT_SOURCES = (*SPLITS, "procedural", "fresh")
+#: Smallest maze of each split beyond the pool (small grids have too few layouts).
+_MIN_SIZE = {"procedural": MIN_PROCEDURAL_SIZE, "fresh": MIN_FRESH_SIZE}
 #: The keys a maze env's ``reset(options=...)`` understands.
 RESET_OPTIONS = ("layout", "layout_index", "start")
 
@@ -80,8 +84,9 @@ def check_env_options(size: Any, obs_type: Any, split: Any) -> None:
     """Check the arguments every maze env takes.
 
     Raises:
-        InvalidOptionError: An unknown ``obs_type`` or ``split``, or a ``size`` that is not an
-            integer of at least 2.
+        InvalidOptionError: An unknown ``obs_type`` or ``split``, a ``size`` that is not an
+            integer of at least 2, or a maze too small for the ``procedural`` or ``fresh``
+            split.
     """
     if obs_type not in OBS_TYPES:
         raise InvalidOptionError(f"unknown obs_type {obs_type!r}; expected one of {OBS_TYPES}")
@@ -90,6 +95,12 @@ def check_env_options(size: Any, obs_type: Any, split: Any) -> None:
     if not is_integer(size) or size < 2:
         raise InvalidOptionError(
             f"a maze needs an integer size of at least 2 cells, got size={_describe(size)}"
+        )
+    least = _MIN_SIZE.get(split, 2)
+    if size < least:
+        raise InvalidOptionError(
+            f"split={split!r} needs a maze of at least {least}x{least} cells, got {size}x{size}"
+            " (a smaller grid has too few layouts outside the canonical pool)"
         )
 
 

@@ -24,14 +24,15 @@ import numpy as np
 
 from abco_envs.maze.layout import generate_layout, layout_hash
 
-__all__ = ["LayoutPool", "layout_pool", "SPLITS", "SPLIT_SIZE", "LOOP_FRACTION"]
+__all__ = ["LayoutPool", "layout_pool", "SPLITS", "SPLIT_SIZE", "LOOP_FRACTION", "POOL_SEED"]
 
 #: Layouts in each split.
 SPLIT_SIZE = 100
 #: Share of cells with an extra wall removed, as in the paper's sample mazes.
 LOOP_FRACTION = 0.2
-#: Root of the pool seeds (the paper's year); one stream per size.
-_POOL_SEED = 2020
+#: Root of the pool seeds (the paper's year); one stream per size (and more in
+#: :mod:`abco_envs.maze.procedural`).
+POOL_SEED = 2020
 #: Give up after this many draws per wanted layout (only tiny grids run out of layouts).
 _MAX_DRAWS_PER_LAYOUT = 200
 SPLITS = ("train", "test")
@@ -70,7 +71,7 @@ class LayoutPool:
 @cache
 def layout_pool(size: int) -> LayoutPool:
     """Build (once per process) the canonical pool of ``size`` x ``size`` mazes."""
-    rng = np.random.default_rng([_POOL_SEED, size])
+    rng = np.random.default_rng([POOL_SEED, size])
     wanted = 2 * SPLIT_SIZE
     layouts: list[np.ndarray] = []
     ids: list[str] = []

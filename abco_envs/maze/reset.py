@@ -1,4 +1,4 @@
-"""What a maze reset draws: its layout, from the ``layout`` option, the pool or the generator.
+"""What a maze reset draws: its layout, from the ``layout`` option, a split or the generator.
 
 Shared by :class:`~abco_envs.maze.env.MazeEnv` and
 :class:`~abco_envs.maze.vector.MazeVectorEnv`, which is how the vector env's maze ``i`` draws
@@ -20,9 +20,10 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from abco_envs.errors import InvalidOptionError
-from abco_envs.maze.layout import generate_layout, layout_hash, validate_layout
+from abco_envs.maze.layout import layout_hash, validate_layout
 from abco_envs.maze.options import check_layout_index
-from abco_envs.maze.pool import LOOP_FRACTION, layout_pool
+from abco_envs.maze.pool import SPLITS, layout_pool
+from abco_envs.maze.procedural import PROCEDURAL_SPLIT_SIZE, draw_fresh_layout, procedural_layout
 from abco_envs.maze.rules import move_table
 
 __all__ = ["DrawnLayout", "LayoutSource"]
@@ -33,7 +34,7 @@ class DrawnLayout(NamedTuple):
 
     Attributes:
         cells: The ``(n, n)`` layout (read-only when it comes from the pool).
-        index: Its index in the split, or -1 for an explicit or procedural layout.
+        index: Its index in the split, or -1 for an explicit or fresh layout.
         layout_id: Its structural id (:func:`~abco_envs.maze.layout.layout_hash`).
         moves: Its ``(n * n, 4)`` :func:`~abco_envs.maze.rules.move_table`.
     """
@@ -57,48 +58,60 @@ class LayoutSource:
 
     Args:
         size: Cells per side.
-        split: ``"train"`` or ``"test"`` (the canonical pool's split), or ``"procedural"``.
+        split: ``"train"`` or ``"test"`` (the canonical pool's split), ``"procedural"`` (the
+            procedural split, indexed like the pool's; see :mod:`abco_envs.maze.procedural`)
+            or ``"fresh"`` (a fresh layout drawn at each reset, in no split).
 
     Attributes:
-        layouts: The split's ``(k, n, n)`` layouts; ``None`` for ``"procedural"``.
-        ids: Their structural ids; ``None`` for ``"procedural"``.
+        count: Layouts in the split; ``None`` for ``"fresh"``.
+        layouts: A pool split's ``(k, n, n)`` layouts; ``None`` for the other splits (the
+            procedural split is generated as far as resets ask, not all at once).
+        ids: Their structural ids; ``None`` likewise.
     """
 
     def __init__(self, size: int, split: str) -> None:
         self.size, self.split = size, split
         self.layouts: np.ndarray | None = None
         self.ids: tuple[str, ...] | None = None
-        if split != "procedural":
+        self.count: int | None = None
+        if split in SPLITS:
             pool = layout_pool(size)
             self.layouts, self.ids = pool.split(split), pool.ids(split)
+            self.count = len(self.layouts)
             self._moves = _pool_move_tables(size, split)
+        elif split == "procedural":
+            self.count = PROCEDURAL_SPLIT_SIZE
 
     def draw(self, rng: np.random.Generator, layout: Any = None, index: Any = None) -> DrawnLayout:
         """The layout of one reset; ``rng`` is drawn from only when no option fixes it.
 
         Args:
-            rng: The env's generator (procedural layouts, or a random index into the split).
+            rng: The env's generator (fresh layouts, or a random index into the split).
             layout: The ``layout`` reset option (validated), if given.
             index: The ``layout_index`` reset option, if given (ignored with ``layout``).
 
         Raises:
             InvalidLayoutError: ``layout`` is not a valid layout of this size.
-            InvalidOptionError: ``index`` is not an integer, or is given to a procedural env.
+            InvalidOptionError: ``index`` is not an integer, or is given to a fresh env.
             OptionOutOfRangeError: ``index`` is outside the split (an ``IndexError``).
         """
         if layout is not None:
             cells = validate_layout(layout, self.size)
             return DrawnLayout(cells, -1, layout_hash(cells), move_table(cells))
-        if self.layouts is None or self.ids is None:
+        if self.count is None:
             if index is not None:
                 raise InvalidOptionError(
-                    f"reset option 'layout_index' {index!r} needs a pool split, but this env's"
-                    " split is 'procedural' (its layouts are generated, not indexed)"
+                    f"reset option 'layout_index' {index!r} needs an indexed split ('train',"
+                    " 'test' or 'procedural'), but this env's split is 'fresh' (its layouts"
+                    " are drawn, not indexed)"
                 )
-            cells = generate_layout(self.size, rng, LOOP_FRACTION)
-            return DrawnLayout(cells, -1, layout_hash(cells), move_table(cells))
+            cells, key = draw_fresh_layout(self.size, rng)
+            return DrawnLayout(cells, -1, key, move_table(cells))
         if index is None:
-            index = int(rng.integers(len(self.layouts)))
+            index = int(rng.integers(self.count))
         else:
-            index = check_layout_index(index, len(self.layouts), self.split)
+            index = check_layout_index(index, self.count, self.split)
+        if self.layouts is None or self.ids is None:  # the procedural split
+            cells, key = procedural_layout(self.size, index)
+            return DrawnLayout(cells, index, key, move_table(cells))
         return DrawnLayout(self.layouts[index], index, self.ids[index], self._moves[index])

@@ -35,6 +35,7 @@ from abco_envs.maze.options import (
     is_integer,
     resolve_image_size,
 )
+from abco_envs.maze.pool import SPLITS
 from abco_envs.maze.render import MazeRenderer
 from abco_envs.maze.reset import DrawnLayout, LayoutSource
 from abco_envs.maze.rules import MAX_EPISODE_STEPS, START_POSITION, MazeDynamics
@@ -139,7 +140,9 @@ class MazeVectorEnv(VectorEnv):
     # -- resets -------------------------------------------------------------------------------
 
     def _background(self, index: int, cells: np.ndarray) -> np.ndarray:
-        if index < 0:
+        # Only the pool's 100-layout splits are cached: the procedural split's 10,000
+        # backgrounds would take 120 MB at 64x64 (1.5 GB at 224x224).
+        if index < 0 or self.split not in SPLITS:
             return self.renderer.background(cells)
         if index not in self._pool_backgrounds:
             self._pool_backgrounds[index] = self.renderer.background(cells)

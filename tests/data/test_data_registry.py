@@ -1,4 +1,5 @@
-"""The registry of the dataset ids: twelve of Table 1, three start-cell pre-demonstrations."""
+"""The registry of the dataset ids: twelve of Table 1, three start-cell pre-demonstrations,
+four procedural ones."""
 
 import pytest
 
@@ -7,10 +8,12 @@ from abco_data.errors import UnknownDatasetError
 
 
 def test_twelve_ids_two_kinds_per_env():
-    assert len(abco_data.DATASET_IDS) == 15
-    assert len(set(abco_data.DATASET_IDS)) == 15
-    assert abco_data.DATASET_IDS[12:] == tuple(f"abco/maze{n}x{n}-pre-start-v0"
-                                               for n in (3, 5, 10))
+    assert len(abco_data.DATASET_IDS) == 19
+    assert len(set(abco_data.DATASET_IDS)) == 19
+    assert abco_data.DATASET_IDS[12:15] == tuple(f"abco/maze{n}x{n}-pre-start-v0"
+                                                 for n in (3, 5, 10))
+    assert abco_data.DATASET_IDS[15:] == tuple(f"abco/maze{n}x{n}-procedural-{k}-v0"
+                                               for n in (5, 10) for k in ("expert", "pre"))
     for env_id in ("AbcoMaze3x3-v0", "AbcoMaze5x5-v0", "AbcoMaze10x10-v0", "CartPole-v1",
                    "Acrobot-v1", "MountainCar-v0"):
         for kind in ("expert", "pre_demonstrations"):
@@ -26,7 +29,7 @@ def test_id_spelling():
 
 def test_seeds_are_distinct():
     seeds = [abco_data.spec(i).params["seed"] for i in abco_data.DATASET_IDS]
-    assert len(set(seeds)) == 15
+    assert len(set(seeds)) == 19
 
 
 def test_unknown_id_lists_known_ones():

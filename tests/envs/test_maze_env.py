@@ -150,13 +150,13 @@ def test_explicit_layout_start_and_index():
         env.reset(options={"start": (5, 0)})
 
 
-def test_test_split_and_procedural_layouts():
+def test_test_split_and_fresh_layouts():
     test_env = gym.make("AbcoMaze5x5-v0", split="test")
     _, info = test_env.reset(seed=0)
     assert info["layout_id"] in layout_pool(5).test_ids
-    proc = gym.make("AbcoMaze5x5-v0", split="procedural")
-    _, a = proc.reset(seed=5)
-    _, b = proc.reset(seed=5)
+    fresh = gym.make("AbcoMaze5x5-v0", split="fresh")
+    _, a = fresh.reset(seed=5)
+    _, b = fresh.reset(seed=5)
     assert a["layout_id"] == b["layout_id"]
 
 

@@ -132,9 +132,9 @@ def test_a_failed_vector_reset_leaves_every_maze_as_it_was():
         assert envs.unwrapped.layout_indices.tolist() == before["layout_index"].tolist()
 
 
-def test_layout_index_is_refused_by_a_procedural_env():
-    env = gym.make("AbcoMaze5x5-v0", split="procedural")
-    with pytest.raises(InvalidOptionError, match="'layout_index' 3 needs a pool split"):
+def test_layout_index_is_refused_by_a_fresh_env():
+    env = gym.make("AbcoMaze5x5-v0", split="fresh")
+    with pytest.raises(InvalidOptionError, match="'layout_index' 3 needs an indexed split"):
         env.reset(seed=0, options={"layout_index": 3})
 
 
