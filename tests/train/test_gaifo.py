@@ -14,6 +14,7 @@ import abco_envs
 from abco_train.config import ConfigError
 from abco_train.data import load_training_data
 from abco_train.methods import INTERACTION_KINDS, get_method, resolve_config
+from abco_train.policy import load_policy
 from abco_train.train import seed_everything, train
 
 pytest.importorskip("stable_baselines3")
@@ -133,13 +134,15 @@ def test_same_seed_same_run_on_cpu(tiny_data, tmp_path):
     assert any(not torch.equal(v, other[2]["policy"][k]) for k, v in first[2]["policy"].items())
 
 
-def test_a_resumed_run_ends_as_an_uninterrupted_one(tiny_data, tmp_path):
+def test_a_resumed_run_ends_as_an_uninterrupted_one_and_reloads(tiny_data, tmp_path):
     whole = train(gaifo_config("CartPole-v1", tiny_data, tmp_path / "whole"))
     cfg = gaifo_config("CartPole-v1", tiny_data, tmp_path / "cut")
     assert train(cfg, stop_after=1) is None
     resumed = train(cfg)
     assert resumed["episodes"] == whole["episodes"]
     assert resumed["interactions"] == whole["interactions"]
+    # the run folder's policy (abco play, load_policy) acts as the trained one did
+    assert load_policy(tmp_path / "whole").evaluate()["episodes"] == whole["episodes"]
 
 
 def test_unknown_or_bad_options_are_config_errors(tiny_data, tmp_path):
