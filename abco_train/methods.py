@@ -50,7 +50,7 @@ __all__ = ["Method", "register", "get_method", "available", "load_plugins", "res
            "PluginError", "TrainingFailed", "BUILTIN_MODULES", "INTERACTION_KINDS"]  # fmt: skip
 
 #: Modules whose import registers the built-in methods (imported on first lookup).
-BUILTIN_MODULES = ("abco_train.abco", "abco_train.iupe", "abco_train.gaifo")
+BUILTIN_MODULES = ("abco_train.abco", "abco_train.iupe", "abco_train.ilpo", "abco_train.gaifo")
 
 #: Kinds of environment interaction a run may spend (evaluation episodes are not counted):
 #: transitions of the pre-demonstrations it trains on, rollout steps it learns from

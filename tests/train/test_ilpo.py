@@ -1,0 +1,166 @@
+"""ILPO (issue 12): the min-over-latents loss, remapping counted, every env, same seed same run."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from train_testing import tiny_config
+
+import abco_envs
+from abco_train.config import ConfigError
+from abco_train.data import load_training_data
+from abco_train.ilpo import ILPO, expected_prediction_loss, min_over_latents_loss
+from abco_train.methods import INTERACTION_KINDS, available, resolve_config
+from abco_train.train import seed_everything, train
+
+ENVS = (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
+#: A tiny budget: a few gradient steps, a few remapping steps.
+TINY = {"train_steps": 4, "remap_steps": 24, "remap_envs": 4, "remap_epochs": 2}
+
+
+def _config(env_id, tiny_data, run_dir, **changes):
+    return tiny_config(env_id, "ilpo", tiny_data, run_dir, method_options=dict(TINY),
+                       device="cpu", **changes)  # fmt: skip
+
+
+def test_ilpo_is_a_registered_method():
+    assert "ilpo" in available()
+
+
+# -- the losses -------------------------------------------------------------------------------
+
+
+def test_min_over_latents_loss_is_zero_when_one_latent_predicts_the_target():
+    pred = torch.tensor([[[1.0, -2.0, 0.5], [3.0, 3.0, 3.0]]], requires_grad=True)
+    target = pred[0, 0].detach().clone()[None]
+    loss, best = min_over_latents_loss(pred, target)
+    assert loss.item() == 0.0 and best.tolist() == [0]
+    loss.backward()
+    assert torch.count_nonzero(pred.grad) == 0
+
+
+def test_min_over_latents_loss_moves_only_the_best_latent():
+    pred = torch.tensor([[[1.0, 1.0], [5.0, -5.0]],
+                         [[0.0, 0.0], [2.0, 2.0]]], requires_grad=True)  # fmt: skip
+    target = torch.tensor([[1.5, 0.5], [2.0, 1.0]])  # row 0 nearest latent 0, row 1 latent 1
+    loss, best = min_over_latents_loss(pred, target)
+    assert best.tolist() == [0, 1]
+    # mean over features, then over the batch: ((0.25 + 0.25) / 2 + (0 + 1) / 2) / 2
+    assert loss.item() == pytest.approx(0.375)
+    loss.backward()
+    grad = pred.grad
+    assert torch.count_nonzero(grad[0, 1]) == 0 and torch.count_nonzero(grad[1, 0]) == 0
+    assert torch.count_nonzero(grad[0, 0]) == 2 and torch.count_nonzero(grad[1, 1]) == 1
+    # d/dpred of ((pred - target)^2).mean() / B: 2 (pred - target) / (D * B)
+    assert torch.allclose(grad[0, 0], torch.tensor([-0.25, 0.25]))
+
+
+def test_relaxed_min_loss_gives_every_latent_a_little_gradient():
+    pred = torch.tensor([[[0.0], [4.0]]], requires_grad=True)
+    loss, _ = min_over_latents_loss(pred, torch.tensor([[1.0]]), relax=0.1)
+    assert loss.item() == pytest.approx(0.9 * 1.0 + 0.1 * (1.0 + 9.0) / 2)
+    loss.backward()
+    assert torch.count_nonzero(pred.grad) == 2
+
+
+def test_expected_prediction_loss_trains_the_policy_not_the_predictions():
+    pred = torch.tensor([[[0.0, 0.0], [2.0, 2.0]]], requires_grad=True)
+    logits = torch.zeros(1, 2, requires_grad=True)
+    target = torch.tensor([[2.0, 2.0]])
+    loss = expected_prediction_loss(logits.softmax(1), pred, target)
+    assert loss.item() == pytest.approx(1.0)  # the expectation (1, 1) is 1 off in each feature
+    loss.backward()
+    assert pred.grad is None
+    assert logits.grad[0, 1] < 0 < logits.grad[0, 0]  # mass moves to the latent that fits
+    pred.grad = None
+    expected_prediction_loss(logits.softmax(1), pred, target, pred_weight=0.5).backward()
+    assert pred.grad is not None and torch.count_nonzero(pred.grad) > 0
+
+
+# -- runs -----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("env_id", ENVS)
+def test_ilpo_runs_on_every_env(env_id, tiny_data, tmp_path):
+    final = train(_config(env_id, tiny_data, tmp_path))
+    key = "train/paper" if env_id in abco_envs.MAZE_IDS else "episodes"
+    assert final["status"] == "ok"
+    assert np.isfinite(final[key]["performance"])
+    counts = final["interactions"]
+    assert set(counts) == set(INTERACTION_KINDS)
+    assert counts["remapping"] > 0
+    assert counts["pre_demonstration"] == counts["post_demonstration"] == counts["rl"] == 0
+
+
+def test_remapping_steps_are_counted_and_no_pre_demonstrations(tiny_data, tmp_path):
+    cfg = _config("AbcoMaze3x3-v0", tiny_data, tmp_path, iterations=2)
+    final = train(cfg)
+    stored = json.loads((tmp_path / "final.json").read_text())
+    rows = [json.loads(x) for x in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    taken = [r["train"]["remap_steps"] for r in rows]
+    assert len(taken) == 3 and all(0 < t <= TINY["remap_steps"] for t in taken)
+    assert stored["interactions"]["remapping"] == sum(taken) == final["interactions"]["remapping"]
+    assert stored["interactions"]["pre_demonstration"] == 0
+    assert [r["interactions"]["remapping"] for r in rows] == np.cumsum(taken).tolist()
+
+
+def test_a_run_without_remapping_steps_counts_none(tiny_data, tmp_path):
+    cfg = _config("CartPole-v1", tiny_data, tmp_path)
+    cfg.method_options["remap_steps"] = 0
+    assert train(cfg)["interactions"] == dict.fromkeys(INTERACTION_KINDS, 0)
+
+
+def _numbers(run_dir):
+    rows = [json.loads(x) for x in (run_dir / "metrics.jsonl").read_text().splitlines()]
+    final = json.loads((run_dir / "final.json").read_text())
+    final.pop("seconds")
+    return [(r["train"], r["eval"], r["interactions"]) for r in rows], final
+
+
+@pytest.mark.parametrize("env_id", ["CartPole-v1", "AbcoMaze3x3-v0"])
+def test_same_seed_same_run(env_id, tiny_data, tmp_path):
+    train(_config(env_id, tiny_data, tmp_path / "a"))
+    train(_config(env_id, tiny_data, tmp_path / "b"))
+    train(_config(env_id, tiny_data, tmp_path / "c", seed=1))
+    assert _numbers(tmp_path / "a") == _numbers(tmp_path / "b")
+    assert _numbers(tmp_path / "a")[0] != _numbers(tmp_path / "c")[0]
+
+
+def test_a_resumed_run_equals_an_uninterrupted_one(tiny_data, tmp_path):
+    straight = _config("AbcoMaze3x3-v0", tiny_data, tmp_path / "straight")
+    train(straight)
+    resumed = _config("AbcoMaze3x3-v0", tiny_data, tmp_path / "resumed")
+    assert train(resumed, stop_after=1) is None
+    train(resumed)
+    assert _numbers(tmp_path / "straight") == _numbers(tmp_path / "resumed")
+
+
+def test_ilpo_options(tiny_data, tmp_path):
+    cfg = resolve_config(_config("Acrobot-v1", tiny_data, tmp_path))
+    data = load_training_data(cfg)
+    method = ILPO(cfg, data, seed_everything(0))
+    assert method.k == data.n_actions == 3  # default: as many latents as actions
+    assert method.interactions["pre_demonstration"] == 0
+    cfg.method_options["latents"] = 5
+    assert ILPO(cfg, data, seed_everything(0)).k == 5
+    for bad in ({"latent": 3}, {"latents": 1}, {"remap": "nearest"}, {"remap_epsilon": 2.0}):
+        with pytest.raises(ConfigError, match="ilpo option"):
+            ILPO(cfg.replace(method_options=bad), data, seed_everything(0))
+
+
+def test_act_is_the_remapped_argmax_latent(tiny_data, tmp_path):
+    cfg = resolve_config(_config("CartPole-v1", tiny_data, tmp_path))
+    cfg.method_options["remap"] = "table"
+    method = ILPO(cfg, load_training_data(cfg), seed_everything(0))
+    head = method.net.policy[-1]
+    with torch.no_grad():  # a latent policy that always picks latent 1
+        head.weight.zero_()
+        head.bias.copy_(torch.tensor([0.0, 5.0]))
+    method.remap_counts[:] = [[0, 3], [7, 1]]  # latent 1 is mostly action 0
+    obs = np.zeros((6, 4), dtype=np.float32)
+    assert (method.act(obs) == 0).all()
+    method.remap_counts[:] = [[0, 3], [1, 7]]
+    assert (method.act(obs) == 1).all()
