@@ -109,7 +109,7 @@ from abco_train.config import ConfigError, RunConfig
 from abco_train.data import TrainingData
 from abco_train.evaluate import make_vector_env
 from abco_train.methods import Method, register
-from abco_train.nets import CompactCNN, _image_input
+from abco_train.nets import CompactCNN, image_input
 
 __all__ = ["ILPO", "ILPONet", "VectorForwardModel", "ImageForwardModel", "latent_policy",
            "min_over_latents_loss", "expected_prediction_loss", "latent_errors",
@@ -278,7 +278,7 @@ class ImageForwardModel(nn.Module):
 
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``(E(s) pooled to 4x4 and flattened (B, 16 C), predictions (B, k, D))``."""
-        grid = self.embedding(_image_input(obs))
+        grid = self.embedding(image_input(obs))
         b, k = len(grid), len(self.latent)
         mixed = grid.unsqueeze(1) + self.latent[None, :, :, None, None]
         pred = self.head(mixed.flatten(0, 1)).reshape(b, k, -1)

@@ -28,6 +28,7 @@ from abco_train.config import ARCHS, IDM_INPUTS
 __all__ = [
     "ARCHS",
     "IDM_INPUTS",
+    "image_input",
     "SelfAttention2d",
     "FeatureSelfAttention",
     "VectorEncoder",
@@ -140,7 +141,7 @@ class VectorEncoder(nn.Module):
         return self.body((x.float() - self.mean) / self.std)
 
 
-def _image_input(x: torch.Tensor) -> torch.Tensor:
+def image_input(x: torch.Tensor) -> torch.Tensor:
     """``(B, H, W, C)`` images (uint8, or float in ``[-1, 1]``) -> ``(B, C, H, W)`` float."""
     if x.dtype == torch.uint8:
         x = x.float().div_(255.0)
@@ -171,7 +172,7 @@ class CompactCNN(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Flat features of a batch of ``(H, W, C)`` images."""
-        return self.body(_image_input(x))
+        return self.body(image_input(x))
 
 
 class BasicBlock(nn.Module):
@@ -225,7 +226,7 @@ class ResNet18(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """512 pooled features of a batch of ``(H, W, C)`` images."""
-        return self.blocks(self.stem(_image_input(x))).mean(dim=(2, 3))
+        return self.blocks(self.stem(image_input(x))).mean(dim=(2, 3))
 
 
 def _head(in_features: int, hidden: int | None, n_actions: int, dropout: float) -> nn.Module:
