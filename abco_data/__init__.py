@@ -35,7 +35,7 @@ from abco_data.generate import GENERATOR_VERSION, generate
 from abco_data.hub import download, load
 from abco_data.manifest import data_home
 from abco_data.publish import push
-from abco_data.reference import ReferenceReturns
+from abco_data.reference import ReferenceReturns, fresh_reference, layout_reference
 from abco_data.registry import DATASET_IDS, DatasetSpec, dataset_id, spec
 from abco_data.verify import VerifyReport, check_dataset, verify
 
@@ -66,7 +66,9 @@ __all__ = [
     "data_home",
     "dataset_id",
     "download",
+    "fresh_reference",
     "generate",
+    "layout_reference",
     "load",
     "open_dataset",
     "push",

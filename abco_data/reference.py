@@ -1,7 +1,9 @@
 """Reference returns: what an expert and a random policy score, for Performance ``P``.
 
 ``P = (R - random) / (expert - random)``. For mazes both references are per layout (the paper
-normalised per maze) and cover the ``train`` and ``test`` splits:
+normalised per maze); a dataset's cover the pool's ``train`` and ``test`` splits
+(:func:`maze_reference`), and :func:`layout_reference` computes them, the same way, for any
+other layouts (the procedural layouts a run trains on, fresh layouts: :func:`fresh_reference`):
 
 - expert: the optimal return ``1 - (L - 1) * 0.1 / n**2`` of the layout's shortest path ``L``;
 - random: the mean return of uniformly random actions over ``episodes`` seeded episodes with
@@ -16,7 +18,12 @@ Example:
     (200, True)
     >>> round(ref.performance(ref.expert_mean), 6)
     1.0
-"""
+    >>> fresh = fresh_reference(5, 3, seed=0, episodes=20)
+    >>> fresh.layout_splits, fresh.layout_ids == fresh_reference(5, 3, seed=0, episodes=20).layout_ids
+    (('fresh', 'fresh', 'fresh'), True)
+    >>> len(ref.extended(fresh).layout_ids)
+    203
+"""  # noqa: E501
 
 from __future__ import annotations
 
@@ -27,10 +34,15 @@ import numpy as np
 
 from abco_envs.maze.rules import MAX_EPISODE_STEPS
 
-__all__ = ["ReferenceReturns", "maze_reference", "classic_reference", "REFERENCE_SEED"]
+__all__ = ["ReferenceReturns", "maze_reference", "layout_reference", "fresh_reference",
+           "classic_reference", "REFERENCE_SEED", "REFERENCE_EPISODES"]
 
 #: Seed root of every reference computation (independent of the datasets' seeds).
 REFERENCE_SEED = 12345
+#: Random episodes per layout of the random reference (the published datasets' value).
+REFERENCE_EPISODES = 100
+#: Random-walk streams of :func:`layout_reference` (the pool's splits use 0 and 1).
+_LAYOUT_STREAM = 2
 #: The maze's step limit, which caps every random walk (the env's own rule).
 MAZE_MAX_STEPS = MAX_EPISODE_STEPS
 
@@ -42,8 +54,10 @@ class ReferenceReturns:
     Attributes:
         expert_mean: Mean expert return (mazes: over the train split's layouts).
         random_mean: Mean random-policy return (mazes: over the train split's layouts).
-        layout_ids: Mazes: structural ids of the train then the test layouts; else ``None``.
-        layout_splits: Mazes: ``"train"`` or ``"test"`` for each entry of ``layout_ids``.
+        layout_ids: Mazes: structural ids of the layouts (a dataset's: the train then the test
+            split); else ``None``.
+        layout_splits: Mazes: where each entry of ``layout_ids`` comes from (a dataset's:
+            ``"train"`` or ``"test"``; :func:`layout_reference`'s: its ``split`` argument).
         expert_per_layout: Mazes: optimal return of each layout; else ``None``.
         random_per_layout: Mazes: mean random return on each layout; else ``None``.
     """
@@ -66,13 +80,45 @@ class ReferenceReturns:
             random = float(self.random_per_layout[i])  # type: ignore[index]
         return (float(episode_return) - random) / (expert - random)
 
+    def extended(self, other: ReferenceReturns) -> ReferenceReturns:
+        """These references plus ``other``'s layouts that are not here yet (mazes).
 
-def _random_walk_returns(cells: np.ndarray, episodes: int, seed: int) -> np.ndarray:
-    """Mean return of ``episodes`` uniform random walks on each layout of ``cells`` (k, n, n)."""
+        The means stay this one's; a layout in both keeps this one's references.
+
+        Raises:
+            ValueError: Either holds no per-layout references.
+        """
+        if self.layout_ids is None or other.layout_ids is None:
+            raise ValueError("only per-layout (maze) references can be extended")
+        known = set(self.layout_ids)
+        new = [i for i, lid in enumerate(other.layout_ids) if lid not in known]
+        if not new:
+            return self
+        splits = other.layout_splits or ("",) * len(other.layout_ids)
+        expert = np.concatenate([np.asarray(self.expert_per_layout),
+                                 np.asarray(other.expert_per_layout)[new]])
+        random = np.concatenate([np.asarray(self.random_per_layout),
+                                 np.asarray(other.random_per_layout)[new]])
+        for arr in (expert, random):
+            arr.flags.writeable = False
+        return ReferenceReturns(
+            expert_mean=self.expert_mean, random_mean=self.random_mean,
+            layout_ids=self.layout_ids + tuple(other.layout_ids[i] for i in new),
+            layout_splits=(self.layout_splits or ("",) * len(self.layout_ids))
+            + tuple(splits[i] for i in new),
+            expert_per_layout=expert, random_per_layout=random,
+        )
+
+
+def _random_walk_returns(cells: np.ndarray, episodes: int, seed: int | tuple[int, ...]
+                         ) -> np.ndarray:  # fmt: skip
+    """Mean return of ``episodes`` uniform random walks on each layout of ``cells`` (k, n, n),
+    drawn from the generator ``[REFERENCE_SEED, *seed, n]``."""
     from abco_envs.maze.rules import MazeDynamics, episode_return, move_table
 
     k, n = cells.shape[0], cells.shape[1]
-    rng = np.random.default_rng([REFERENCE_SEED, seed, n])
+    stream = list(seed) if isinstance(seed, tuple) else [seed]
+    rng = np.random.default_rng([REFERENCE_SEED, *stream, n])
     dynamics, moves = MazeDynamics(n), move_table(cells)
     layout = np.repeat(np.arange(k), episodes)
     cell = np.zeros(layout.size, dtype=np.intp)  # every walk starts in cell (0, 0)
@@ -116,6 +162,58 @@ def maze_reference(size: int, episodes: int = 100) -> ReferenceReturns:
         layout_ids=tuple(ids), layout_splits=tuple(splits),
         expert_per_layout=expert_arr, random_per_layout=random_arr,
     )
+
+
+def layout_reference(cells: np.ndarray, split: str = "layouts", *,
+                     episodes: int = REFERENCE_EPISODES, stream: int = 0) -> ReferenceReturns:
+    """Per-layout references of any maze layouts, computed as the datasets' are.
+
+    The expert return of a layout is its optimal return (shortest path); the random one the
+    mean return of ``episodes`` uniform random walks from ``(0, 0)`` with the 1000-step cap,
+    all layouts' walks drawn from one generator (``[REFERENCE_SEED, 2, stream, n]``, apart
+    from the pool's), so the numbers are fixed by the layouts, their order, ``episodes`` and
+    ``stream``. About 1 s for 100 5x5 or 10x10 layouts at 100 episodes.
+
+    Args:
+        cells: ``(k, n, n)`` layouts (k >= 1).
+        split: The name stored in ``layout_splits`` for each (e.g. ``"fresh"``).
+        episodes: Random walks per layout.
+        stream: Another stream of random walks for another set of layouts.
+
+    Returns:
+        References whose means are over these layouts.
+
+    Raises:
+        ValueError: No layouts, or not a stack of square layouts.
+    """
+    from abco_envs.maze.layout import layout_hash, shortest_path_length
+    from abco_envs.maze.rules import optimal_return
+
+    cells = np.asarray(cells)
+    if cells.ndim != 3 or cells.shape[1] != cells.shape[2] or not len(cells):
+        raise ValueError(f"expected a (k, n, n) stack of k >= 1 layouts, got {cells.shape}")
+    size = cells.shape[1]
+    lengths = np.array([shortest_path_length(c) for c in cells], dtype=np.float64)
+    expert = np.asarray(optimal_return(size, lengths), dtype=np.float64)
+    random = _random_walk_returns(cells, episodes, (_LAYOUT_STREAM, int(stream)))
+    for arr in (expert, random):
+        arr.flags.writeable = False
+    return ReferenceReturns(
+        expert_mean=float(expert.mean()), random_mean=float(random.mean()),
+        layout_ids=tuple(layout_hash(c) for c in cells), layout_splits=(split,) * len(cells),
+        expert_per_layout=expert, random_per_layout=random,
+    )
+
+
+@lru_cache(maxsize=16)
+def fresh_reference(size: int, count: int, seed: int = 0,
+                    episodes: int = REFERENCE_EPISODES) -> ReferenceReturns:  # fmt: skip
+    """References of :func:`abco_envs.fresh_layouts` ``(size, count, seed)`` (cached per
+    process); their walks are stream ``1 + seed`` of :func:`layout_reference`."""
+    from abco_envs.maze.procedural import fresh_layouts
+
+    return layout_reference(fresh_layouts(size, count, seed), "fresh", episodes=episodes,
+                            stream=1 + int(seed))
 
 
 def _mean_return(env_id: str, policy_for_episode, episodes: int, seed: int) -> float:

@@ -58,14 +58,20 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from abco_train.config import RunConfig
+import abco_envs
+from abco_train.config import RunConfig, env_kind
 from abco_train.data import TrainingData
 from abco_train.evaluate import Rollouts
 from abco_train.methods import Method, TrainingFailed, register
 from abco_train.nets import build_networks
 from abco_train.sampling import sample_training_set
 
-__all__ = ["VARIANTS", "ABCO", "DEAD_MARGIN", "validation_split"]
+__all__ = ["VARIANTS", "ABCO", "DEAD_MARGIN", "validation_split", "TRANSPOSED_ACTIONS",
+           "transpose_batch"]  # fmt: skip
+
+#: A maze transposed about its main diagonal ((row, col) -> (col, row); start and goal stay)
+#: turns each action into another: N <-> W, S <-> E (``abco_envs.Action`` order N, S, E, W).
+TRANSPOSED_ACTIONS = torch.tensor([3, 2, 1, 0])
 
 #: An IDM whose held-out accuracy is below ``chance + DEAD_MARGIN`` is at chance (dead).
 DEAD_MARGIN = 0.05
@@ -92,6 +98,28 @@ VARIANTS: dict[str, dict[str, Any]] = {
 }
 
 
+def transpose_batch(frames: list[torch.Tensor], labels: torch.Tensor, rng: np.random.Generator
+                    ) -> tuple[list[torch.Tensor], torch.Tensor]:  # fmt: skip
+    """Transpose each example of a minibatch with probability 1/2 (``--augment transpose``).
+
+    A chosen example's ``(B, H, W, C)`` frames (all of them: ``s`` and ``s'`` of a transition)
+    are transposed about the main diagonal and its action label mapped by
+    :data:`TRANSPOSED_ACTIONS`: a transposed maze, rendered, is the transposed frame, and its
+    start ``(0, 0)`` and goal ``(n-1, n-1)`` stay where they are.
+    """
+    flip = torch.from_numpy(rng.random(len(labels)) < 0.5)
+    if not flip.any():
+        return frames, labels
+    out = []
+    for x in frames:
+        x = x.clone()
+        x[flip] = x[flip].transpose(1, 2)
+        out.append(x)
+    labels = labels.clone()
+    labels[flip] = TRANSPOSED_ACTIONS[labels[flip]]
+    return out, labels
+
+
 def _fit(
     net: torch.nn.Module,
     opt: torch.optim.Optimizer,
@@ -103,9 +131,11 @@ def _fit(
     desc: str = "",
     quiet: bool = True,
     device: torch.device | None = None,
+    augment: bool = False,
 ) -> float:
     """Cross-entropy epochs over ``labels``; ``inputs(idx) -> args of net`` (CPU tensors,
-    moved batch by batch to ``device``). Mean loss of the last epoch."""
+    moved batch by batch to ``device``); ``augment``: :func:`transpose_batch` on each
+    minibatch. Mean loss of the last epoch."""
     from tqdm.auto import tqdm
 
     net.train()
@@ -118,8 +148,11 @@ def _fit(
         for start in range(0, n, batch_size):
             bar.update(1)
             idx = order[start : start + batch_size]
-            batch = [x.to(device, non_blocking=True) for x in inputs(idx)]
-            loss = F.cross_entropy(net(*batch), labels[idx].to(device, non_blocking=True))
+            batch, targets = list(inputs(idx)), labels[idx]
+            if augment:
+                batch, targets = transpose_batch(batch, targets, rng)
+            batch = [x.to(device, non_blocking=True) for x in batch]
+            loss = F.cross_entropy(net(*batch), targets.to(device, non_blocking=True))
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
@@ -182,7 +215,10 @@ class ABCO(Method):
             deltas = states[data.pre_t + 1] - states[data.pre_t]
             stats = {"obs_mean": states.mean(0), "obs_std": states.std(0),
                      "delta_mean": deltas.mean(0), "delta_std": deltas.std(0)}  # fmt: skip
+        if env_kind(config.env) == "maze":  # the cellnet reads the frame cell by cell
+            stats["grid"] = abco_envs.maze_size(config.env)
         self.net_stats = stats
+        self.augment = config.augment == "transpose"
         self.policy, self.idm = build_networks(
             data.observation_space, data.n_actions, config.arch, bool(config.attention),
             config.idm_input, **stats,
@@ -248,6 +284,7 @@ class ABCO(Method):
         stats["policy_loss"] = _fit(
             self.policy, self.policy_opt, lambda idx: (self.expert_obs[self.expert_t[idx]],),
             labels, policy_epochs, cfg.batch_size, self.rng, "policy", cfg.quiet, self.device,
+            self.augment,
         )  # fmt: skip
         stats["policy_epochs"] = policy_epochs
         predicted = _predict(self.policy, lambda idx: (self.expert_obs[self.expert_t[idx]],),
@@ -341,7 +378,7 @@ class ABCO(Method):
             return s, s1
 
         return _fit(self.idm, self.idm_opt, pairs, labels, 1, self.config.batch_size,
-                    self.rng, "IDM", self.config.quiet, self.device)  # fmt: skip
+                    self.rng, "IDM", self.config.quiet, self.device, self.augment)  # fmt: skip
 
     # -- post-demonstrations and the next I_s --------------------------------------------------
 

@@ -73,11 +73,13 @@ def _bench(args: argparse.Namespace) -> int:
     from dataclasses import fields
 
     from abco_train.config import RunConfig
-    from abco_train.grid import CELL_FIELDS, parse_list, parse_seeds, plan, run_grid
+    from abco_train.grid import CELL_FIELDS, parse_layouts, parse_list, parse_seeds, plan, run_grid
 
     overrides = {f.name: getattr(args, f.name) for f in fields(RunConfig)
                  if f.name not in CELL_FIELDS and getattr(args, f.name, None) is not None}
-    cells = plan(parse_list(args.envs), parse_list(args.methods), parse_seeds(args.seeds))
+    layouts = [None] if args.layouts is None else parse_layouts(args.layouts)
+    cells = plan(parse_list(args.envs), parse_list(args.methods), parse_seeds(args.seeds),
+                 layouts)  # fmt: skip
     summary = run_grid(
         cells, args.out, overrides=overrides, method_options=args.method_options,
         plugins=args.plugin, backend=args.backend, jobs=args.jobs, threads=args.threads,
@@ -92,6 +94,11 @@ def _bench_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--envs", required=True, help="comma-separated env ids")
     parser.add_argument("--methods", required=True, help="comma-separated method names")
     parser.add_argument("--seeds", default="0-4", help="seeds, e.g. 0-4 or 0,2,5 (default 0-4)")
+    parser.add_argument("--layouts", default=None, metavar="K[,K...]",
+                        help="mazes 5x5/10x10: one cell per number of training layouts, each "
+                        "training on the first K layouts of the procedural datasets, in "
+                        "OUT/{env}/{method}/layouts{K}/seed{seed} (e.g. 100,1000,10000; "
+                        "default: the standard datasets)")  # fmt: skip
     parser.add_argument("--out", required=True, help="the grid's folder (RUNS_DIR)")
     parser.add_argument("--jobs", type=_positive, default=None,
                         help="cells at once (default: cores)")  # fmt: skip
@@ -99,7 +106,7 @@ def _bench_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--address", default=None, help="Ray cluster address (ray backend)")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
     group = parser.add_argument_group("trainer overrides (every cell; default: the trainer's)")
-    add_config_options(group, exclude=("env", "method", "seed", "run_dir", "quiet"),
+    add_config_options(group, exclude=("env", "method", "seed", "layouts", "run_dir", "quiet"),
                        unset_defaults=True)  # fmt: skip
 
 

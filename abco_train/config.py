@@ -2,9 +2,12 @@
 
 One :class:`RunConfig` describes a run. Fields left ``None`` take the default of the run's
 environment kind and preset from :data:`DEFAULTS` (a table you can read), then
-:data:`ENV_DEFAULTS` for single environments, then the method's own defaults
-(:meth:`abco_train.methods.Method.defaults`). :data:`RUNTIME_FIELDS` may change between a run
-and its resumption; every other field is part of the run's identity.
+:data:`ENV_DEFAULTS` for single environments, then :data:`REGIME_DEFAULTS`, then with
+``layouts`` the procedural datasets (:data:`LAYOUT_DEFAULTS`), then the method's own defaults
+(:meth:`abco_train.methods.Method.defaults`). ``eval_fresh`` stays ``None`` (on with
+``layouts``: :func:`fresh_evaluation`), so the configs of runs made before it still match.
+:data:`RUNTIME_FIELDS` may change between a run and its resumption; every other field is part
+of the run's identity.
 
 The command lines of ``abco train`` and ``abco bench`` are both generated from the fields by
 :func:`add_config_options` (help text from each field's ``help`` metadata, choices and lower
@@ -39,22 +42,34 @@ import abco_envs
 
 __all__ = [
     "RunConfig", "ConfigError", "DEFAULTS", "ENV_DEFAULTS", "RUNTIME_FIELDS", "PRESETS",
-    "PROTOCOLS", "ARCHS", "ARCHS_BY_KIND", "DEVICES", "IDM_INPUTS", "REGIMES",
-    "REGIME_DEFAULTS", "env_kind", "known_envs", "comparable",
+    "PROTOCOLS", "ARCHS", "ARCHS_BY_KIND", "DEVICES", "IDM_INPUTS", "REGIMES", "AUGMENTS",
+    "REGIME_DEFAULTS", "LAYOUT_DEFAULTS", "PROCEDURAL_ENVS",
+    "MAX_LAYOUTS", "env_kind", "known_envs",
+    "comparable", "procedural_dataset", "fresh_evaluation",
     "add_config_options", "config_from_args", "flag_of",
 ]  # fmt: skip
 
-PRESETS = ("cpu", "paper")
+PRESETS = ("cpu", "paper", "general")
 PROTOCOLS = ("paper", "standard")
 #: Encoder architectures: ``mlp`` (vector states), ``cnn`` (compact, CPU default for images),
-#: ``resnet18`` (the paper's image network); the ones that fit each env kind's observations.
-ARCHS = ("mlp", "cnn", "resnet18")
+#: ``resnet18`` (the paper's image network), ``cellnet`` (mazes: per-cell features, a
+#: recurrent convolution over the cell grid and a global read-out; the ``general`` preset's);
+#: the ones that fit each env kind's observations.
+ARCHS = ("mlp", "cnn", "resnet18", "cellnet")
 DEVICES = ("auto", "cpu", "cuda")
 #: How the IDM reads a transition (:class:`abco_train.nets.IDMNet`).
 IDM_INPUTS = ("difference", "pair")
 #: ``default``: abco's data and schedule; ``authors``: the authors' (see REGIME_DEFAULTS).
 REGIMES = ("default", "authors")
-ARCHS_BY_KIND = {"maze": ("cnn", "resnet18"), "classic": ("mlp",)}
+ARCHS_BY_KIND = {"maze": ("cnn", "resnet18", "cellnet"), "classic": ("mlp",)}
+#: Training-time data augmentation: ``none``, or ``transpose`` (mazes: each minibatch
+#: example is transposed about the main diagonal with probability 1/2, actions mapped
+#: N<->W, S<->E; start and goal stay where they are).
+AUGMENTS = ("none", "transpose")
+#: The mazes with procedural datasets (``abco_data.registry.PROCEDURAL_ENVS``), which
+#: ``--layouts`` trains on, and their number of layouts.
+PROCEDURAL_ENVS = ("AbcoMaze5x5-v0", "AbcoMaze10x10-v0")
+MAX_LAYOUTS = 10_000
 
 
 class ConfigError(ValueError):
@@ -81,6 +96,24 @@ def start_cell_dataset(env_id: str) -> str:
     return f"abco/maze{n}x{n}-pre-start-v0"
 
 
+def procedural_dataset(kind: str) -> Any:
+    """A callable default: the env's procedural ``kind`` (``expert`` or ``pre``) dataset id."""
+
+    def dataset(env_id: str) -> str:
+        n = abco_envs.maze_size(env_id)
+        return f"abco/maze{n}x{n}-procedural-{kind}-v0"
+
+    return dataset
+
+
+def fresh_evaluation(config: RunConfig) -> bool:
+    """Whether the final evaluation also covers fresh layouts: ``--eval-fresh`` if given,
+    else for runs that train on procedural layouts (``--layouts``), mazes only."""
+    if env_kind(config.env) != "maze":
+        return False
+    return bool(config.eval_fresh) if config.eval_fresh is not None else config.layouts is not None
+
+
 def known_envs() -> tuple[str, ...]:
     """The environments abco trains on."""
     return (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
@@ -103,13 +136,15 @@ class RunConfig:
     method: str = _opt("a registered method: bc, bco, bco-alpha, abco, attention, "
                        "sampling-partial, sampling-whole, abco-whole, or a plugin's", "abco")
     seed: int = _opt("seed of everything (same seed, same CPU run)", 0, min=0)
-    preset: str = _opt("cpu (compact CNN on images) or paper (the paper's ResNet-18)", "cpu",
-                       choices=PRESETS)  # fmt: skip
+    preset: str = _opt("cpu (compact CNN on images), paper (the paper's ResNet-18) or general "
+                       "(mazes: a network that reasons over the whole maze, for unseen layouts)",
+                       "cpu", choices=PRESETS)  # fmt: skip
     regime: str = _opt("default (abco's data and schedule) or authors (the authors': start-cell "
                        "pre-demonstrations without wall hits, one IDM and one policy epoch per "
                        "iteration, alpha 10)", "default", choices=REGIMES)
     iterations: int | None = _opt("alpha: iterations 0..alpha run (iterative methods)", min=0)
-    arch: str | None = _opt("network: mlp (vectors), cnn or resnet18 (images)", choices=ARCHS)
+    arch: str | None = _opt("network: mlp (vectors), cnn, resnet18 or cellnet (images)",
+                            choices=ARCHS)  # fmt: skip
     attention: bool | None = _opt("self-attention in both networks (default: the method's)")
     idm_input: str | None = _opt("how the IDM reads (s, s'): difference (one encoder over s and "
                                  "s' - s) or pair (each frame encoded apart; images only)",
@@ -128,8 +163,17 @@ class RunConfig:
     pre_transitions: int | None = _opt("use at most this many pre-demonstration transitions",
                                        min=1)  # fmt: skip
     expert_episodes: int | None = _opt("use at most this many expert episodes", min=1)
+    layouts: int | None = _opt("mazes 5x5 and 10x10: train on the first K layouts of the "
+                               "procedural datasets (abco/maze{n}-procedural-{expert,pre}-v0 "
+                               "unless --expert-data/--pre-data name others; default: the "
+                               "standard datasets, all their layouts)", min=1)
+    augment: str | None = _opt("training-time augmentation: none, or transpose (mazes: "
+                               "transpose half of each minibatch about the main diagonal, "
+                               "actions N<->W, S<->E; default: the preset's)", choices=AUGMENTS)
     eval_episodes: int | None = _opt("classic control: episodes per evaluation", min=1)
     eval_layouts: int | None = _opt("mazes: evaluate the first k layouts only (tests)", min=1)
+    eval_fresh: bool | None = _opt("mazes: also evaluate the final policy on 100 fresh layouts "
+                                   "(in no dataset; default: on with --layouts, else off)")
     protocol: str = _opt("maze evaluation protocol while training: paper (4th visit of a cell "
                          "ends, return -1) or standard", "paper", choices=PROTOCOLS)
     eval_max_steps: int | None = _opt("cap on evaluation episode length (default: the env's)",
@@ -154,21 +198,30 @@ class RunConfig:
         """A copy with every ``None`` field filled in.
 
         Order: :data:`DEFAULTS` of the env kind and preset, then :data:`ENV_DEFAULTS`, then
-        :data:`REGIME_DEFAULTS`, then ``method_defaults`` (the method's own,
-        :meth:`abco_train.methods.Method.defaults`); fields set by the user always win.
+        :data:`REGIME_DEFAULTS`, then with ``layouts`` :data:`LAYOUT_DEFAULTS`, then
+        ``method_defaults`` (the method's own, :meth:`abco_train.methods.Method.defaults`);
+        fields set by the user always win.
         """
         key = (env_kind(self.env), self.preset)
         if key not in DEFAULTS:
+            if self.preset in PRESETS:
+                fits = sorted(p for k, p in DEFAULTS if k == key[0])
+                raise ConfigError(f"--preset {self.preset} is not for {self.env}; use "
+                                  f"{' or '.join(fits)}")  # fmt: skip
             raise ConfigError(f"--preset must be one of {', '.join(PRESETS)}, got {self.preset!r}")
-        base = {**DEFAULTS[key], **ENV_DEFAULTS.get(abco_envs.env_name(self.env), {}),
+        name = abco_envs.env_name(self.env)
+        base = {**DEFAULTS[key], **ENV_DEFAULTS.get(name, {}),
                 **REGIME_DEFAULTS.get((key[0], self.regime), {}),
+                **(LAYOUT_DEFAULTS if self.layouts is not None else {}),
                 **(method_defaults or {})}  # fmt: skip
         values = asdict(self)
         for name, default in base.items():
             if values[name] is None:  # a callable default depends on the env (a dataset id)
                 values[name] = default(self.env) if callable(default) else default
         if values["run_dir"] is None:
-            values["run_dir"] = str(Path("runs") / f"{self.env}-{self.method}-s{self.seed}")
+            layouts = "" if self.layouts is None else f"-K{self.layouts}"
+            name = f"{self.env}-{self.method}{layouts}-s{self.seed}"
+            values["run_dir"] = str(Path("runs") / name)
         return RunConfig(**values)
 
     def validate(self) -> RunConfig:
@@ -183,6 +236,27 @@ class RunConfig:
         if self.arch is not None and self.arch in ARCHS and self.arch not in ARCHS_BY_KIND[kind]:
             raise ConfigError(f"--arch {self.arch} does not fit {self.env}'s observations; use "
                               f"{' or '.join(ARCHS_BY_KIND[kind])}")  # fmt: skip
+        if self.arch == "cellnet" and self.idm_input == "pair":
+            raise ConfigError("--arch cellnet reads a transition as one frame and its difference"
+                              " (--idm-input difference): its pooled features of one frame do"
+                              " not say where the agent is")  # fmt: skip
+        if kind == "classic" and self.augment not in (None, "none"):
+            raise ConfigError(f"--augment {self.augment} is for maze frames; classic control "
+                              "takes --augment none")  # fmt: skip
+        if kind == "classic" and self.eval_fresh:
+            raise ConfigError("--eval-fresh is for mazes: classic control has no layouts")
+        if self.layouts is not None and abco_envs.env_name(self.env) not in PROCEDURAL_ENVS:
+            raise ConfigError(f"--layouts needs a maze with procedural datasets "
+                              f"({' or '.join(PROCEDURAL_ENVS)}), got --env {self.env}"
+                              + (" (a 3x3 grid has too few layouts)" if kind == "maze"
+                                 else ""))  # fmt: skip
+        if isinstance(self.layouts, int) and self.layouts > MAX_LAYOUTS:
+            raise ConfigError(f"--layouts must be <= {MAX_LAYOUTS:,} (the layouts of the "
+                              f"procedural datasets), got {self.layouts}")  # fmt: skip
+        if self.layouts is not None and self.regime == "authors" and self.pre_data is None:
+            raise ConfigError("--regime authors brings its own pre-demonstrations (the pool's "
+                              "start-cell walks, 100 layouts); with --layouts give --pre-data "
+                              "too, or use --regime default")  # fmt: skip
         for f in fields(self):
             value = getattr(self, f.name)
             if value is None:
@@ -223,6 +297,13 @@ DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
         "idm_epochs": 4, "idm_patience": 1, "policy_epochs": 3, "first_epochs_factor": 3,
         "batch_size": 32, "lr": 1e-4, "idm_samples": 20_000,
     },
+    # Unseen layouts: per-cell features and a recurrent convolution over the cell grid (no
+    # weight tied to a position), transposed mazes for twice the data (docs/training.md).
+    ("maze", "general"): {
+        "iterations": 2, "arch": "cellnet", "attention": True, "idm_input": "difference",
+        "idm_epochs": 4, "idm_patience": 1, "policy_epochs": 3, "first_epochs_factor": 3,
+        "batch_size": 64, "lr": 1e-3, "idm_samples": 20_000, "augment": "transpose",
+    },
     ("classic", "cpu"): {
         "iterations": 2, "arch": "mlp", "attention": True, "idm_input": "difference",
         "idm_epochs": 2, "idm_patience": 1, "policy_epochs": 4, "first_epochs_factor": 2,
@@ -245,6 +326,11 @@ ENV_DEFAULTS: dict[str, dict[str, Any]] = {
     # validation seeds 100-102 (docs/results/progress-issue9.md), not on reported seeds.
     "Acrobot-v1": {"iterations": 10},
 }
+
+#: The datasets of a run with ``--layouts`` (unless ``--expert-data`` / ``--pre-data`` are
+#: given): the procedural datasets of its maze, whose first K layouts it trains on.
+LAYOUT_DEFAULTS: dict[str, Any] = {"expert_data": procedural_dataset("expert"),
+                                   "pre_data": procedural_dataset("pre")}
 
 #: The authors' data and schedule (their public code, where the paper is silent), on top of
 #: the table above: one IDM epoch and one policy epoch per iteration, no longer first

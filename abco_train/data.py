@@ -18,12 +18,17 @@ import numpy as np
 
 import abco_data
 import abco_envs
-from abco_train.config import RunConfig
+from abco_train.config import ConfigError, RunConfig
 
-__all__ = ["TrainingData", "resolve_dataset", "load_training_data", "KINDS"]
+__all__ = ["TrainingData", "resolve_dataset", "load_training_data", "distinct_layouts",
+           "KINDS", "TRAIN_EVAL_LAYOUTS"]  # fmt: skip
 
 #: Dataset kinds of a run, by the role they play.
 KINDS = {"expert": "expert", "pre": "pre_demonstrations"}
+#: A run on the first K layouts (``--layouts``) is evaluated on its training layouts (the
+#: ``train`` evaluation, whose rollouts are also ABCO's post-demonstrations) on the first
+#: ``min(K, TRAIN_EVAL_LAYOUTS)`` of them: as many as the pool's train split has.
+TRAIN_EVAL_LAYOUTS = 100
 
 
 def resolve_dataset(
@@ -84,6 +89,10 @@ class TrainingData:
         expert_t: Row of ``s_t`` of each expert transition.
         expert_eval_actions: The expert's true actions: for measuring IDM accuracy (and for
             ``bc``, the supervised reference) only, never as labels of an IfO method.
+        layouts: Mazes with ``--layouts``: K, the number of layouts trained on; else ``None``.
+        train_layouts: Mazes with ``--layouts``: the ``(k, n, n)`` layouts of the ``train``
+            evaluation (the first ``min(K, TRAIN_EVAL_LAYOUTS)`` training layouts, whose
+            references ``reference`` then includes); ``None``: the pool's train split.
     """
 
     env_id: str
@@ -97,6 +106,8 @@ class TrainingData:
     expert_obs: np.ndarray
     expert_t: np.ndarray
     expert_eval_actions: np.ndarray
+    layouts: int | None = None
+    train_layouts: np.ndarray | None = None
 
     @property
     def is_maze(self) -> bool:
@@ -105,31 +116,67 @@ class TrainingData:
 
 
 def _columns(dataset: abco_data.Dataset, episodes: int | None
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    """Observations, ``s_t`` rows and actions of a dataset's first ``episodes`` episodes."""
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, abco_data.DatasetArrays]:  # fmt: skip
+    """Observations, ``s_t`` rows and actions of a dataset's first ``episodes`` episodes (and
+    the arrays they come from)."""
     arrays = dataset.load_arrays()
     obs_t, _ = dataset.transition_index()
     actions = dataset.actions_of_transitions(idm_eval=True)
     if episodes is not None:
         n = int(arrays.episode_lengths[:episodes].sum())
         obs_t, actions = obs_t[:n], actions[:n]
-    return arrays.observations, obs_t, actions
+    return arrays.observations, obs_t, actions, arrays
+
+
+def _first_layouts(dataset: abco_data.Dataset, k: int, flag: str) -> abco_data.Dataset:
+    """The view of ``dataset``'s first ``k`` layouts, or a ConfigError naming ``flag``."""
+    try:
+        return dataset.first_layouts(k)
+    except (ValueError, abco_data.WrongKindError) as exc:
+        raise ConfigError(f"--layouts {k} with {flag} {dataset.id or dataset.path}: {exc}"
+                          ) from None  # fmt: skip
+
+
+def distinct_layouts(arrays: abco_data.DatasetArrays, count: int) -> np.ndarray:
+    """The first ``count`` distinct layouts of a maze dataset's episodes, in file order."""
+    if arrays.layouts is None or arrays.layout_indices is None:
+        raise ValueError("not a maze dataset: its episodes carry no layouts")
+    starts = np.flatnonzero(np.r_[True, arrays.layout_indices[1:] != arrays.layout_indices[:-1]])
+    return np.ascontiguousarray(arrays.layouts[starts[:count]])
 
 
 def load_training_data(config: RunConfig) -> TrainingData:
-    """Load (download or generate if needed) and subsample the run's two datasets."""
+    """Load (download or generate if needed) and subsample the run's two datasets.
+
+    With ``config.layouts`` (K), both datasets are cut to their first K layouts
+    (:meth:`abco_data.Dataset.first_layouts`), and the ``train`` evaluation moves to the
+    first ``min(K, TRAIN_EVAL_LAYOUTS)`` of them, their references computed by
+    :func:`abco_data.layout_reference` and added to the dataset's.
+
+    Raises:
+        ConfigError: K is more than a dataset's layouts, or a dataset is not a maze's.
+        abco_data.DatasetError: A dataset is unusable (see :func:`resolve_dataset`).
+    """
     progress = not config.quiet
     expert = resolve_dataset(config.expert_data, config.env, KINDS["expert"],
                              cache_dir=config.cache_dir, progress=progress)  # fmt: skip
     pre = resolve_dataset(config.pre_data, config.env, KINDS["pre"],
                           cache_dir=config.cache_dir, progress=progress)  # fmt: skip
-    pre_obs, pre_t, pre_actions = _columns(pre, None)
+    reference, train_layouts = expert.reference, None
+    if config.layouts is not None:
+        expert = _first_layouts(expert, config.layouts, "--expert-data")
+        pre = _first_layouts(pre, config.layouts, "--pre-data")
+    pre_obs, pre_t, pre_actions, _ = _columns(pre, None)
     if config.pre_transitions is not None:
         pre_t, pre_actions = pre_t[: config.pre_transitions], pre_actions[: config.pre_transitions]
-    expert_obs, expert_t, expert_actions = _columns(expert, config.expert_episodes)
+    expert_obs, expert_t, expert_actions, arrays = _columns(expert, config.expert_episodes)
+    if config.layouts is not None:
+        train_layouts = distinct_layouts(arrays, min(config.layouts, TRAIN_EVAL_LAYOUTS))
+        reference = reference.extended(abco_data.layout_reference(train_layouts, "training"))
     return TrainingData(
         env_id=config.env, env_kwargs=json.loads(expert.attrs.get("env_kwargs", "{}") or "{}"),
         observation_space=expert.observation_space, n_actions=int(expert.action_space.n),
-        reference=expert.reference, pre_obs=pre_obs, pre_t=pre_t, pre_actions=pre_actions,
+        reference=reference, pre_obs=pre_obs, pre_t=pre_t, pre_actions=pre_actions,
         expert_obs=expert_obs, expert_t=expert_t, expert_eval_actions=expert_actions,
+        layouts=config.layouts, train_layouts=train_layouts,
     )  # fmt: skip

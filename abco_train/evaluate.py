@@ -2,7 +2,8 @@
 
 Every evaluation episode runs in its own slot of a vector env: for mazes a
 :class:`~abco_envs.maze.MazeVectorEnv` with one slot per layout of the split (``layout_index``
-``0..k-1``, start ``(0, 0)``), for classic control a ``SyncVectorEnv`` reset with seeds
+``0..k-1``, start ``(0, 0)``) or per layout given (``layouts``: the training layouts of a run
+on procedural data, fresh layouts), for classic control a ``SyncVectorEnv`` reset with seeds
 ``seed + i``. Each step calls the policy once on the observations of every episode still
 running. The rollouts double as ABCO's post-demonstrations ``I_pos``: with ``record=True``
 every run's observations and actions are kept.
@@ -97,21 +98,24 @@ def rollout(
     protocol: str = "paper",
     record: bool = False,
     max_steps: int | None = None,
+    layouts: np.ndarray | None = None,
 ) -> Rollouts:
     """Run ``act`` on a batch of episodes, one policy call per step for all of them.
 
     Args:
         act: Batched greedy policy: ``(B, *obs_shape)`` observations -> ``(B,)`` actions.
         env_id: Gymnasium id.
-        episodes: Mazes: evaluate the first ``episodes`` layouts of ``split`` (default: all);
-            classic control: number of episodes (default 100).
-        split: Maze split, ``"train"`` or ``"test"``.
+        episodes: Mazes: evaluate the first ``episodes`` layouts of ``split`` or of
+            ``layouts`` (default: all); classic control: number of episodes (default 100).
+        split: Maze split, ``"train"`` or ``"test"`` (ignored with ``layouts``).
         env_kwargs: Extra env arguments (mazes: ``obs_type``, ``image_size``).
         seed: Reset seed (episode ``i`` gets ``seed + i``).
         protocol: ``"standard"`` or ``"paper"`` (see module docstring).
         record: Keep observations and actions (post-demonstrations).
         max_steps: End episodes (unsuccessful unless the goal was reached on that step)
             after this many steps; default the env's own limit.
+        layouts: Mazes: ``(k, n, n)`` layouts to evaluate on, one episode each (the
+            ``layout`` reset option), instead of a split's; their ``layout_indices`` are -1.
     """
     if protocol not in PROTOCOLS:
         raise ValueError(f"unknown protocol {protocol!r}; expected one of {PROTOCOLS}")
@@ -120,10 +124,13 @@ def rollout(
     options: dict[str, Any] = {}
     if maze:
         n = abco_envs.maze_size(env_id)
-        available = len(abco_envs.layout_pool(n).split(split))
+        given = layouts is not None
+        available = len(layouts) if given else len(abco_envs.layout_pool(n).split(split))
         num = available if episodes is None else min(int(episodes), available)
-        kwargs["split"] = split
-        options = {"layout_index": list(range(num)), "start": np.zeros((num, 2), dtype=int)}
+        kwargs["split"] = "train" if given else split
+        options = ({"layout": np.asarray(layouts)[:num]} if given
+                   else {"layout_index": list(range(num))})  # fmt: skip
+        options["start"] = np.zeros((num, 2), dtype=int)
     else:
         num = 100 if episodes is None else int(episodes)
     envs = make_vector_env(env_id, num, kwargs)

@@ -1,7 +1,9 @@
 """The (env, method, seed) grid of ``abco bench``, each cell an independent training run.
 
 Every cell is :func:`abco_train.train.train` with the trainer's defaults (plus the overrides
-given to the whole grid) in its own run folder ``OUT/{env}/{method}/seed{seed}``:
+given to the whole grid) in its own run folder ``OUT/{env}/{method}/seed{seed}``; a grid over
+numbers of training layouts (``abco bench --layouts 100,1000``, the generalisation protocol)
+has one more level, ``OUT/{env}/{method}/layouts{K}/seed{seed}``:
 
 * a cell whose ``final.json`` exists is skipped, so re-running an interrupted benchmark
   resumes it; a cell with a ``checkpoint.pt`` but no ``final.json`` resumes through the
@@ -21,6 +23,8 @@ Example:
     [0, 1, 2, 7]
     >>> [c.key for c in plan(["CartPole-v1"], ["bc", "abco"], [0])]
     ['CartPole-v1/bc/seed0', 'CartPole-v1/abco/seed0']
+    >>> [c.key for c in plan(["AbcoMaze5x5-v0"], ["bc"], [0], layouts=[100, 1000])]
+    ['AbcoMaze5x5-v0/bc/layouts100/seed0', 'AbcoMaze5x5-v0/bc/layouts1000/seed0']
 """
 
 from __future__ import annotations
@@ -44,7 +48,8 @@ from abco_train.methods import available, load_plugins, resolve_config
 from abco_train.run_folder import FINAL, config_differences, read_json, write_atomic
 
 __all__ = [
-    "Cell", "parse_seeds", "parse_list", "plan", "cell_config", "run_cell", "result_row",
+    "Cell", "parse_seeds", "parse_list", "parse_layouts", "plan", "cell_config", "run_cell",
+    "result_row",
     "read_results", "run_grid", "headline", "RESULTS_FILE", "BENCH_LOG",
     "CELL_FIELDS",
 ]  # fmt: skip
@@ -52,7 +57,8 @@ __all__ = [
 RESULTS_FILE = "results.jsonl"
 BENCH_LOG = "bench_log.jsonl"
 #: Config fields the grid sets per cell (never trainer overrides).
-CELL_FIELDS = ("env", "method", "seed", "run_dir", "quiet", "threads", "method_options")
+CELL_FIELDS = ("env", "method", "seed", "layouts", "run_dir", "quiet", "threads",
+               "method_options")  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -62,15 +68,20 @@ class Cell:
     env: str
     method: str
     seed: int
+    layouts: int | None = None
 
     @property
     def key(self) -> str:
-        """``env/method/seed{seed}``: the cell's run folder relative to the grid's folder."""
-        return f"{self.env}/{self.method}/seed{self.seed}"
+        """``env/method/seed{seed}`` (``env/method/layouts{K}/seed{seed}`` for a cell that
+        trains on the first K procedural layouts): its run folder under the grid's folder."""
+        return str(self.run_dir(Path())).replace(os.sep, "/")
 
     def run_dir(self, out: str | os.PathLike[str]) -> Path:
         """The cell's run folder under ``out``."""
-        return Path(out) / self.env / self.method / f"seed{self.seed}"
+        folder = Path(out) / self.env / self.method
+        if self.layouts is not None:
+            folder = folder / f"layouts{self.layouts}"
+        return folder / f"seed{self.seed}"
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -96,6 +107,27 @@ def parse_seeds(text: str) -> list[int]:
     return seeds
 
 
+def parse_layouts(text: str) -> list[int]:
+    """Numbers of training layouts from ``"100,1000,10000"`` (``10k`` and ``1,000``-style
+    thousands are not accepted: plain integers, comma-separated; order kept, no repeats).
+
+    Raises:
+        ConfigError: Not a positive integer.
+    """
+    out: list[int] = []
+    for part in (p.strip() for p in text.split(",")):
+        if not part:
+            continue
+        if not part.isdigit() or int(part) < 1:
+            raise ConfigError(f"bad --layouts value {part!r}; expected positive integers such as"
+                              " 100,1000,10000")  # fmt: skip
+        if int(part) not in out:
+            out.append(int(part))
+    if not out:
+        raise ConfigError("no --layouts given")
+    return out
+
+
 def parse_list(text: str) -> list[str]:
     """Comma-separated names, blanks dropped, order kept, no repeats."""
     out: list[str] = []
@@ -105,9 +137,12 @@ def parse_list(text: str) -> list[str]:
     return out
 
 
-def plan(envs: Sequence[str], methods: Sequence[str], seeds: Sequence[int]) -> list[Cell]:
-    """Every (env, method, seed) cell, env-major."""
-    return [Cell(e, m, int(s)) for e in envs for m in methods for s in seeds]
+def plan(envs: Sequence[str], methods: Sequence[str], seeds: Sequence[int],
+         layouts: Sequence[int | None] = (None,)) -> list[Cell]:  # fmt: skip
+    """Every (env, method, layouts, seed) cell, env-major; ``layouts``: numbers of training
+    layouts (``None``: the standard datasets)."""
+    return [Cell(e, m, int(s), None if k is None else int(k))
+            for e in envs for m in methods for k in layouts for s in seeds]  # fmt: skip
 
 
 def cell_config(
@@ -135,6 +170,7 @@ def cell_config(
         raise ConfigError(f"the grid sets {', '.join(clash)} per cell; not an override")
     return {
         **overrides, "env": cell.env, "method": cell.method, "seed": cell.seed,
+        **({"layouts": cell.layouts} if cell.layouts is not None else {}),
         "run_dir": str(cell.run_dir(out)), "quiet": True, "threads": int(threads),
         "method_options": dict(method_options or {}),
     }  # fmt: skip
@@ -175,6 +211,7 @@ def result_row(config: dict[str, Any], final: dict[str, Any] | None, wall_s: flo
     """
     return {
         "env": config["env"], "method": config["method"], "seed": int(config["seed"]),
+        **({"layouts": config["layouts"]} if config.get("layouts") is not None else {}),
         "run_dir": str(config["run_dir"]), "status": _status(final),
         "final": final, "wall_s": wall_s, "threads": config.get("threads"),
         "reference": _references(config, cached_only) if _status(final) == "done" else None,
@@ -218,7 +255,8 @@ def read_results(out: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
         for line in path.read_text().splitlines():
             if line.strip():
                 row = json.loads(line)
-                rows[Cell(row["env"], row["method"], int(row["seed"])).key] = row
+                cell = Cell(row["env"], row["method"], int(row["seed"]), row.get("layouts"))
+                rows[cell.key] = row
     return rows
 
 

@@ -84,15 +84,16 @@ def plot_label_distribution(
 
 def plot_maze_paths(
     env_id: str, split: str, layout_indices: list[int], paths: list[np.ndarray],
-    successes: list[bool], path: Path,
+    successes: list[bool], path: Path, layouts: np.ndarray | None = None,
 ) -> Path:  # fmt: skip
-    """The agent's paths drawn over a few maze layouts."""
+    """The agent's paths drawn over a few maze layouts: ``layout_indices`` of ``split``, or
+    the ``layouts`` given (``(k, n, n)``, e.g. fresh ones; then the indices just count)."""
     import abco_envs
     from abco_envs.maze.render import MazeRenderer
 
     plt = _pyplot()
     n = abco_envs.maze_size(env_id)
-    pool = abco_envs.layout_pool(n).split(split)
+    pool = abco_envs.layout_pool(n).split(split) if layouts is None else np.asarray(layouts)
     renderer = MazeRenderer(n, 256, 256)
     fig, axes = plt.subplots(1, len(layout_indices), figsize=(3 * len(layout_indices), 3.2))
     axes = np.atleast_1d(axes)

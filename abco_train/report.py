@@ -47,7 +47,12 @@ from abco_train.report_grid import (
     method_order,
     table_evaluation,
 )  # fmt: skip
-from abco_train.report_plots import plot_label_distributions, plot_performance
+from abco_train.report_plots import (
+    GENERALISATION_PNG,
+    plot_generalisation,
+    plot_label_distributions,
+    plot_performance,
+)
 
 __all__ = [
     "TABLE1_ENVS", "TABLE1_METHODS", "TABLE2_METHODS", "TABLE2_ENV", "ORDER", "LABELS",
@@ -90,6 +95,18 @@ def _intro(runs_dir: Path, grid: Grid) -> list[str]:
     ]  # fmt: skip
 
 
+def _generalisation_intro() -> list[str]:
+    return [
+        "Runs trained on the first K layouts of the procedural datasets (`--layouts K`), and",
+        "beside them the same methods' runs on the standard datasets (K `standard`: the",
+        "pool's 100 train layouts, 10 expert paths each). Train: the layouts trained on (the",
+        "first 100 of a procedural run's; the pool's train split for a standard run); Test:",
+        "the pool's 100 held-out test layouts; Fresh: 100 fresh layouts, in no dataset",
+        "(`abco_envs.fresh_layouts(n, 100, 300000000)`, the same for every run). Paper",
+        "protocol; P mean over seeds with its 95% bootstrap CI (seeds, then episodes); success",
+        "rate: mean over seeds.", ""]  # fmt: skip
+
+
 def write_report(runs_dir: str | Path, out: str | Path | None = None,
                  labels_env: str = TABLE2_ENV, baseline: str | None = None,
                  ) -> dict[str, Path]:  # fmt: skip
@@ -104,7 +121,7 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
 
     Returns:
         The written files by name (``report``, ``csv``, and the plots that had data:
-        ``performance``, ``labels``, ``profile``).
+        ``performance``, ``labels``, ``profile``, ``generalisation``).
 
     Raises:
         ReportError: ``runs_dir`` is not a folder, holds no run folders, or has no method
@@ -117,17 +134,28 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
     if not runs:
         raise ReportError(f"{runs_dir} holds no run folders ({{env}}/{{method}}/seed{{n}}); "
                           "is it an `abco bench --out` folder?")  # fmt: skip
-    grid = Grid(runs)
-    if baseline is not None and baseline not in grid.methods:
+    grid = Grid([r for r in runs if r.layouts is None])  # the paper's tables: standard data
+    every = Grid(runs)
+    if baseline is not None and baseline not in every.methods:
         raise ReportError(f"unknown baseline {baseline!r}: not a method of {runs_dir}; methods"
-                          f" found: {', '.join(grid.methods)}")  # fmt: skip
+                          f" found: {', '.join(every.methods)}")  # fmt: skip
     baseline = baseline or "abco"
     out = Path(out) if out is not None else runs_dir / "report"
     out.mkdir(parents=True, exist_ok=True)
     csv_rows: list[dict[str, Any]] = []
-    wall, wall_lines = tables.wall(runs_dir, grid)
+    wall, wall_lines = tables.wall(runs_dir, every)
     main = grid.main_methods
-    label = {m: LABELS.get(m, m) for m in grid.methods + main}
+    label = {m: LABELS.get(m, m) for m in every.methods + main}
+    gen_cells = tables.generalisation_cells(runs)
+    gen_lines = [*(_generalisation_intro() if gen_cells else []),
+                 *tables.generalisation(runs, csv_rows)]
+    gen_png = plot_generalisation(gen_cells, out / GENERALISATION_PNG, label, env_order)
+    files: dict[str, Path] = {}
+    if not grid.runs:  # procedural-data runs only: the generalisation section
+        md = [*_intro(runs_dir, every), "", "## Generalisation", "", *gen_lines,
+              "", "## Wall time", "", *wall_lines, "", "## Plots", ""]  # fmt: skip
+        _plots(md, files, [("generalisation", gen_png, _GEN_CAPTION)])
+        return _write(out, md, csv_rows, files)
     t1 = [(e, m, label[m], published(m, e)) for e in TABLE1_ENVS for m in main
           if grid.has(e, m)]  # fmt: skip
     t1_test = [(e, m, label[m], None) for e in MAZES for m in main if grid.has(e, m)]
@@ -140,7 +168,6 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
     means = {e: {m: s.mean for m in main
                  if (s := grid.stats(e, m, table_evaluation(e), "performance"))}
              for e in TABLE1_ENVS}  # fmt: skip
-    files: dict[str, Path] = {}
     perf_png = plot_performance(grid.by_cell, out / "performance_per_iteration.png", env_order)
     labels_png = plot_label_distributions(grid.by_cell, labels_env, ("bco-alpha", "abco"),
                                           out / "idm_label_distribution.png")  # fmt: skip
@@ -154,6 +181,7 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
           *aggregate.separation(means, TABLE1_ENVS, label),
           "", "## Table 1, mazes on the held-out test split", "",
           *(tables.table(grid, t1_test, "test", csv_rows, "table1-test") if t1_test else empty),
+          "", "## Generalisation: held-out and fresh layouts", "", *gen_lines,
           "", "## Table 2: ablation on the 5x5 maze, train split", "",
           *(tables.table(grid, t2, "train", csv_rows, "table2") if t2 else empty),
           "", "Table 2's BCO row is BCO(α) (the paper's Table 2 BCO repeats Table 1's).",
@@ -168,17 +196,34 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
           *tables.references(grid), "", "## Wall time", "", *wall_lines,
           "", "## Plots", ""]  # fmt: skip
     csv_rows += agg_rows
-    for name, png, caption in (
+    _plots(md, files, [
         ("performance", perf_png, "P per iteration (band: min..max across seeds)"),
         ("labels", labels_png, f"IDM label distribution, BCO(α) vs ABCO on {labels_env}"),
-    ):  # fmt: skip
+        ("generalisation", gen_png, _GEN_CAPTION),
+    ])  # fmt: skip
+    if profile_png is not None:
+        files["profile"] = profile_png
+    return _write(out, md, csv_rows, files)
+
+
+_GEN_CAPTION = ("Held-out success rate and P against the number of training layouts (test"
+                " split solid, fresh layouts dashed)")
+
+
+def _plots(md: list[str], files: dict[str, Path],
+           plots: list[tuple[str, Path | None, str]]) -> None:  # fmt: skip
+    """Each plot's Markdown image (or a line saying it had no runs) and its file entry."""
+    for name, png, caption in plots:
         if png is None:
             md.append(f"- {caption}: no runs to plot.")
         else:
             files[name] = png
             md.append(f"![{caption}]({png.name})")
-    if profile_png is not None:
-        files["profile"] = profile_png
+
+
+def _write(out: Path, md: list[str], csv_rows: list[dict[str, Any]],
+           files: dict[str, Path]) -> dict[str, Path]:  # fmt: skip
+    """Write ``report.md`` and ``results.csv``; return every file by name."""
     files["report"] = out / "report.md"
     files["report"].write_text("\n".join(md) + "\n")
     files["csv"] = out / "results.csv"

@@ -61,7 +61,7 @@ GOALS = {"aer": {e: PAPER_TABLE1["abco"][e][1] for e in TABLE1_ENVS}, "performan
          "published_aer": PUBLISHED_AER, "wall_s": 4 * 3600.0}  # fmt: skip
 
 CSV_FIELDS = ("table", "env", "method", "evaluation", "metric", "seeds", "mean", "ci_low",
-              "ci_high", "iqm", "iqm_ci_low", "iqm_ci_high", "paper")  # fmt: skip
+              "ci_high", "iqm", "iqm_ci_low", "iqm_ci_high", "paper", "layouts")  # fmt: skip
 
 
 def table_evaluation(env: str, split: str = "train") -> str:
@@ -97,6 +97,8 @@ class Run:
     path: Path
     final: dict[str, Any] | None
     row: dict[str, Any] = field(default_factory=dict)
+    #: K of a run on the first K procedural layouts; ``None``: the standard datasets.
+    layouts: int | None = None
 
     @property
     def status(self) -> str:
@@ -118,7 +120,9 @@ class Run:
         score = (self.final or {}).get(evaluation)
         if not isinstance(score, dict) or metric not in score:
             return None
-        per_episode = score.get("episode_returns" if metric == "aer" else "episode_performance")
+        # Per-episode values exist for returns and P; a success rate is one number per run.
+        per_episode = score.get({"aer": "episode_returns",
+                                 "performance": "episode_performance"}.get(metric, ""))
         return np.asarray(per_episode if per_episode else [score[metric]], dtype=np.float64)
 
     def interactions(self, kind: str) -> int | None:
@@ -127,19 +131,30 @@ class Run:
         return int(counts[kind]) if isinstance(counts, dict) and kind in counts else None
 
 
+def _layouts_of(name: str) -> int | None:
+    """K of a ``layouts{K}`` folder name, else ``None``."""
+    return int(name[7:]) if name.startswith("layouts") and name[7:].isdigit() else None
+
+
 def load_runs(runs_dir: str | Path) -> list[Run]:
-    """Every run folder ``{env}/{method}/seed{seed}`` under ``runs_dir`` (finished or not)."""
+    """Every run folder ``{env}/{method}/seed{seed}`` and ``{env}/{method}/layouts{K}/seed{seed}``
+    under ``runs_dir`` (finished or not)."""
     runs_dir = Path(runs_dir)
     rows = read_results(runs_dir)
     runs = []
-    for path in sorted(runs_dir.glob("*/*/seed*")):
+    paths = [*runs_dir.glob("*/*/seed*"), *runs_dir.glob("*/*/layouts*/seed*")]
+    for path in sorted(paths):
         if not path.is_dir() or not path.name[4:].isdigit():
+            continue
+        layouts = _layouts_of(path.parent.name)
+        if path.parent.name.startswith("layouts") and layouts is None:
             continue
         final_path = path / "final.json"
         final = json.loads(final_path.read_text()) if final_path.exists() else None
-        env, method, seed = path.parent.parent.name, path.parent.name, int(path.name[4:])
-        row = rows.get(f"{env}/{method}/seed{seed}", {})
-        runs.append(Run(env, method, seed, path, final, row))
+        method_dir = path.parent if layouts is None else path.parent.parent
+        env, method, seed = method_dir.parent.name, method_dir.name, int(path.name[4:])
+        row = rows.get(path.relative_to(runs_dir).as_posix(), {})
+        runs.append(Run(env, method, seed, path, final, row, layouts))
     return runs
 
 

@@ -1,7 +1,9 @@
-"""The plots of ``abco report``: P per iteration, and the IDM's label distribution.
+"""The plots of ``abco report``: P per iteration, the IDM's label distribution, and
+generalisation against the number of training layouts.
 
-Both read the runs of a grid by cell: ``by_cell[(env, method)]`` is a list of
-:class:`abco_train.report.Run` (anything with ``metrics()`` and ``row``).
+The first two read the runs of a grid by cell: ``by_cell[(env, method)]`` is a list of
+:class:`abco_train.report.Run` (anything with ``metrics()`` and ``row``); the third by
+``(env, method, layouts)``.
 """
 
 from __future__ import annotations
@@ -12,7 +14,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["pyplot", "plot_performance", "plot_label_distributions"]
+__all__ = ["pyplot", "plot_performance", "plot_label_distributions", "plot_generalisation",
+           "GENERALISATION_PNG"]  # fmt: skip
+
+GENERALISATION_PNG = "generalisation.png"
 
 ByCell = Mapping[tuple[str, str], Sequence[Any]]
 
@@ -118,6 +123,63 @@ def plot_label_distributions(by_cell: ByCell, env: str, methods: Sequence[str], 
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def plot_generalisation(cells: Mapping[tuple[str, str, int | None], Sequence[Any]], path: Path,
+                        labels: Mapping[str, str] | None = None,
+                        env_key: Callable[[str], Any] = str) -> Path | None:  # fmt: skip
+    """Held-out success rate and P against the number of training layouts (log x).
+
+    One row of two panels (success, P) per maze env with runs on procedural layouts; one
+    line per method: the test split (solid) and fresh layouts (dashed, where evaluated),
+    paper protocol, mean over seeds with the 95% bootstrap interval as error bars. Cells of
+    the standard datasets (``layouts`` ``None``) are not drawn (they are not a point on the
+    axis: 100 pool layouts with 10 expert paths each).
+    """
+    from abco_train.stats import cell_stats
+
+    labels = labels or {}
+    envs = sorted({e for e, _, k in cells if k is not None}, key=env_key)
+    if not envs:
+        return None
+    plt = pyplot()
+    fig, axes = plt.subplots(len(envs), 2, figsize=(10, 3.4 * len(envs)), squeeze=False)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for row, env in zip(axes, envs):
+        methods = list(dict.fromkeys(m for e, m, k in cells if e == env and k is not None))
+        for i, method in enumerate(methods):
+            ks = sorted(k for e, m, k in cells if e == env and m == method and k is not None)
+            for split, style in (("test", "-"), ("fresh", "--")):
+                for ax, metric in zip(row, ("success_rate", "performance")):
+                    xs, ys, lo, hi = [], [], [], []
+                    for k in ks:
+                        runs = cells[(env, method, k)]
+                        s = cell_stats([v for r in runs
+                                        if (v := r.values(f"{split}/paper", metric)) is not None])
+                        if s is None:
+                            continue
+                        xs.append(k)
+                        ys.append(s.mean)
+                        lo.append(s.mean - s.ci[0])
+                        hi.append(s.ci[1] - s.mean)
+                    if xs:
+                        ax.errorbar(xs, ys, yerr=[lo, hi], ls=style, marker="o", ms=4,
+                                    capsize=3, color=colours[i % len(colours)],
+                                    label=f"{labels.get(method, method)}, {split}")
+        for ax, title in zip(row, ("held-out success rate", "held-out P")):
+            ax.set_xscale("log")
+            ax.set_xlabel("training layouts K (first K procedural layouts)")
+            ax.set_title(f"{env}: {title} (paper protocol)", fontsize=9)
+            ax.grid(alpha=0.3, which="both")
+            if ax.get_legend_handles_labels()[0]:
+                ax.legend(fontsize=7)
+        row[0].set_ylim(-0.02, 1.02)
+    fig.suptitle("Generalisation: test split (solid) and fresh layouts (dashed); mean over "
+                 "seeds, bars = 95% bootstrap CI", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

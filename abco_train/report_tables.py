@@ -22,19 +22,27 @@ import numpy as np
 from abco_train.methods import INTERACTION_KINDS
 from abco_train.report_grid import (
     GOALS,
+    LABELS,
     TABLE1_ENVS,
     TABLE1_METHODS,
     TABLE2_ENV,
     TABLE2_METHODS,
     Grid,
+    Run,
     env_order,
     method_order,
     table_evaluation,
 )
-from abco_train.stats import CellStats
+from abco_train.stats import CellStats, cell_stats
 
 __all__ = ["table", "goals", "missing", "references", "all_runs", "wall", "seed_text",
-           "count_text"]  # fmt: skip
+           "count_text", "generalisation", "generalisation_cells",
+           "GENERALISATION_SPLITS"]  # fmt: skip
+
+#: The evaluations of the generalisation table: the layouts trained on (a run on the first K
+#: procedural layouts: 100 of them; else the pool's train split), the held-out test split,
+#: and fresh layouts (in no dataset), each under the paper's protocol.
+GENERALISATION_SPLITS = ("train", "test", "fresh")
 
 #: Column titles of the interaction kinds.
 KIND_TITLES = {"pre_demonstration": "Pre-demo", "post_demonstration": "Post-demo", "rl": "RL",
@@ -301,3 +309,55 @@ def wall(runs_dir: Path, grid: Grid) -> tuple[float | None, list[str]]:
                      f" jobs {s.get('jobs')}, threads {s.get('threads')}, ran {s.get('ran')},"
                      f" skipped {s.get('skipped')}, failed {len(s.get('failed', []))}")
     return wall_s, lines
+
+
+def generalisation_cells(runs: Sequence[Run]) -> dict[tuple[str, str, int | None], list[Run]]:
+    """The finished maze runs of the generalisation section by (env, method, layouts).
+
+    Every run on procedural layouts (``layouts`` K set), every run evaluated on fresh layouts,
+    and, beside them, the standard-data runs of the same (env, method) (``layouts`` ``None``);
+    empty when the grid has neither of the first two.
+    """
+    done = [r for r in runs if r.status == "ok" and r.final is not None]
+    special = [r for r in done if r.layouts is not None or "fresh/paper" in r.final]  # type: ignore[operator]
+    pairs = {(r.env, r.method) for r in special}
+    cells: dict[tuple[str, str, int | None], list[Run]] = {}
+    for r in done:
+        if (r.env, r.method) in pairs:
+            cells.setdefault((r.env, r.method, r.layouts), []).append(r)
+    order = {m: i for i, m in enumerate(method_order({m for _, m, _ in cells}))}
+    return dict(sorted(cells.items(), key=lambda kv: (env_order(kv[0][0]), order[kv[0][1]],
+                                                      -1 if kv[0][2] is None else kv[0][2])))
+
+
+def _layouts_text(k: int | None) -> str:
+    return "standard" if k is None else f"{k:,}"
+
+
+def generalisation(runs: Sequence[Run], csv_rows: list[dict[str, Any]]) -> list[str]:
+    """The generalisation table: per env, method and number of training layouts, P and the
+    success rate on the layouts trained on, the held-out test split and fresh layouts."""
+    cells = generalisation_cells(runs)
+    if not cells:
+        return ["No run trained on procedural layouts (`abco bench --layouts K,...`) or was"
+                " evaluated on fresh layouts (`--eval-fresh`)."]  # fmt: skip
+    head = "| Env | Method | Layouts | Seeds |" + "".join(
+        f" {s.capitalize()} P mean [95% CI] | {s.capitalize()} success |"
+        for s in GENERALISATION_SPLITS)
+    lines = [head, "|" + "---|" * head.count(" |")]
+    for (env, method, k), group in cells.items():
+        row = [env, LABELS.get(method, method), _layouts_text(k),
+               seed_text([r.seed for r in group])]
+        for split in GENERALISATION_SPLITS:
+            evaluation = f"{split}/paper"
+            stats = {}
+            for metric in ("performance", "success_rate", "aer"):
+                values = [v for r in group if (v := r.values(evaluation, metric)) is not None]
+                s = stats[metric] = cell_stats(values)
+                if s is not None:
+                    csv_rows.append({**_stat_row("generalisation", env, method, evaluation,
+                                                 metric, s), "layouts": "" if k is None else k})
+            row += [_ci(stats["performance"]) if stats["performance"] else "–",
+                    _fmt(stats["success_rate"].mean, 2) if stats["success_rate"] else "–"]
+        lines.append("| " + " | ".join(row) + " |")
+    return lines
