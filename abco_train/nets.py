@@ -269,7 +269,7 @@ class CellNet(nn.Module):
 
     def cells(self, x: torch.Tensor) -> torch.Tensor:
         """``(B, C, n, n)`` cell features of ``(B, H, W, C)`` images."""
-        features = self.stem(_image_input(x))
+        features = self.stem(image_input(x))
         grid = self.centres.expand(features.shape[0], -1, -1, -1)
         return F.grid_sample(features, grid, mode="bilinear", align_corners=False)
 
