@@ -155,6 +155,9 @@ class RunConfig:
     idm_validation: int | None = _opt("pre-demonstration transitions held out to measure the "
                                       "IDM (default: 10%, at most 2,000)", min=1)
     policy_epochs: int | None = _opt("policy epochs over the expert data per iteration", min=1)
+    min_updates: int | None = _opt("raise --policy-epochs and --idm-epochs on small data until "
+                                   "each makes at least this many minibatch updates (default: "
+                                   "1000 for the general preset, else none)", min=1)
     first_epochs_factor: int | None = _opt("iteration 0 trains both nets this many times longer",
                                            min=1)  # fmt: skip
     batch_size: int | None = _opt("minibatch size", min=1)
@@ -165,15 +168,16 @@ class RunConfig:
     expert_episodes: int | None = _opt("use at most this many expert episodes", min=1)
     layouts: int | None = _opt("mazes 5x5 and 10x10: train on the first K layouts of the "
                                "procedural datasets (abco/maze{n}-procedural-{expert,pre}-v0 "
-                               "unless --expert-data/--pre-data name others; default: the "
+                               "unless --expert-data/--pre-data name others) (default: the "
                                "standard datasets, all their layouts)", min=1)
     augment: str | None = _opt("training-time augmentation: none, or transpose (mazes: "
                                "transpose half of each minibatch about the main diagonal, "
-                               "actions N<->W, S<->E; default: the preset's)", choices=AUGMENTS)
+                               "actions N<->W, S<->E) (default: transpose for the general "
+                               "preset, else none)", choices=AUGMENTS)
     eval_episodes: int | None = _opt("classic control: episodes per evaluation", min=1)
     eval_layouts: int | None = _opt("mazes: evaluate the first k layouts only (tests)", min=1)
-    eval_fresh: bool | None = _opt("mazes: also evaluate the final policy on 100 fresh layouts "
-                                   "(in no dataset; default: on with --layouts, else off)")
+    eval_fresh: bool | None = _opt("mazes: also evaluate the final policy on 100 fresh layouts, "
+                                   "in no dataset (default: on with --layouts, else off)")
     protocol: str = _opt("maze evaluation protocol while training: paper (4th visit of a cell "
                          "ends, return -1) or standard", "paper", choices=PROTOCOLS)
     eval_max_steps: int | None = _opt("cap on evaluation episode length (default: the env's)",
@@ -298,11 +302,14 @@ DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
         "batch_size": 32, "lr": 1e-4, "idm_samples": 20_000,
     },
     # Unseen layouts: per-cell features and a recurrent convolution over the cell grid (no
-    # weight tied to a position), transposed mazes for twice the data (docs/training.md).
+    # weight tied to a position), transposed mazes for twice the data, and at least 1,000
+    # minibatches per epoch setting, for the 850 expert transitions of 100 layouts as for
+    # the 84,000 of 10,000 (docs/training.md).
     ("maze", "general"): {
         "iterations": 2, "arch": "cellnet", "attention": True, "idm_input": "difference",
         "idm_epochs": 4, "idm_patience": 1, "policy_epochs": 3, "first_epochs_factor": 3,
         "batch_size": 64, "lr": 1e-3, "idm_samples": 20_000, "augment": "transpose",
+        "min_updates": 1_000,
     },
     ("classic", "cpu"): {
         "iterations": 2, "arch": "mlp", "attention": True, "idm_input": "difference",

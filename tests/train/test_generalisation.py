@@ -84,11 +84,12 @@ def test_layouts_selects_the_procedural_datasets() -> None:
 
 def test_the_general_preset() -> None:
     cfg = RunConfig(env=ENV, preset="general").resolved()
-    assert (cfg.arch, cfg.augment, cfg.idm_input, cfg.attention) == \
-        ("cellnet", "transpose", "difference", True)
+    assert (cfg.arch, cfg.augment, cfg.idm_input, cfg.attention, cfg.min_updates) == \
+        ("cellnet", "transpose", "difference", True, 1000)
     for preset in ("cpu", "paper"):  # the existing presets' defaults do not change
         old = RunConfig(env=ENV, preset=preset).resolved()
-        assert old.augment is None and old.arch in ("cnn", "resnet18")
+        assert old.augment is None and old.min_updates is None
+        assert old.arch in ("cnn", "resnet18")
 
 
 @pytest.mark.parametrize(("changes", "message"), [
@@ -296,8 +297,16 @@ def test_transpose_batch() -> None:
     assert torch.equal(frames, torch.arange(36, dtype=torch.uint8).reshape(4, 3, 3, 1))
 
 
+def test_min_updates_raises_epochs_on_small_data(procedural, tmp_path) -> None:
+    """5 layouts are one minibatch an epoch: 10 updates take 10 epochs, times BC's budget."""
+    train(_config(procedural, tmp_path / "run", min_updates=10))
+    record = json.loads((tmp_path / "run" / "metrics.jsonl").read_text().splitlines()[0])
+    assert record["train"]["policy_epochs"] == 10 * (1 + 1)  # first_epochs_factor + alpha
+
+
 def test_general_preset_trains_both_networks(procedural, tmp_path) -> None:
-    final = train(_config(procedural, tmp_path / "run", method="abco", preset="general"))
+    final = train(_config(procedural, tmp_path / "run", method="abco", preset="general",
+                          min_updates=1))  # fmt: skip
     assert final["status"] == "ok" and "fresh/paper" in final
     config = json.loads((tmp_path / "run" / "config.json").read_text())
     assert (config["arch"], config["augment"], config["layouts"]) == ("cellnet", "transpose", 5)
