@@ -241,6 +241,7 @@ def _sb3() -> Any:
     """stable-baselines3's PPO and abco's SB3 classes, defined on first use."""
     _require_sb3()
     from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
     from stable_baselines3.common.vec_env import DummyVecEnv, VecEnvWrapper
@@ -318,7 +319,7 @@ def _sb3() -> Any:
         pass
 
     ns = NS()
-    ns.PPO, ns.Monitor, ns.DummyVecEnv = PPO, Monitor, DummyVecEnv
+    ns.PPO, ns.Monitor, ns.DummyVecEnv, ns.Logger = PPO, Monitor, DummyVecEnv, Logger
     ns.DiscriminatorReward, ns.Standardize, ns.SmallCNN = DiscriminatorReward, Standardize, SmallCNN
     return ns
 
@@ -385,6 +386,9 @@ class GAIfO(Method):
             max_grad_norm=opt["max_grad_norm"], policy_kwargs=policy_kwargs, verbose=0,
             seed=_derived_seed(config.seed, _SB3_SEED), device=self.device,
         )  # fmt: skip
+        # A logger of our own: without one, every learn() call makes a folder SB3-<date> in
+        # the temp dir (SB3's default logger), thousands per grid.
+        self.model.set_logger(sb3.Logger(folder=None, output_formats=[]))
         self.round_steps = opt["n_steps"] * opt["n_envs"]
         self.rounds_total = -(-opt["rl_steps"] // self.round_steps)
 
