@@ -128,7 +128,7 @@ OPTION_DEFAULTS: dict[str, dict[str, Any]] = {
         "latents": None, "train_steps": 1300, "later_steps": 0, "hidden": 128, "channels": 16,
         "pool": 4, "exp_weight": 0.0, "relax": 0.0, "latent_init": "random",
         "split_noise": 0.01, "remap": "state", "remap_input": "effect+embedding",
-        "remap_steps": 500, "remap_envs": 50, "remap_epsilon": 0.2, "remap_margin": 0.5,
+        "remap_steps": 1000, "remap_envs": 50, "remap_epsilon": 0.2, "remap_margin": 0.5,
         "remap_epochs": 20, "remap_max_steps": None,
     },
 }  # fmt: skip
