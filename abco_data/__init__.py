@@ -1,8 +1,9 @@
 """abco_data: the datasets of the ABCO paper as verified, deterministic HDF5 files.
 
-Nineteen datasets (expert states and random-policy pre-demonstrations for six environments,
-the mazes' start-cell pre-demonstrations of the authors' regime, and expert and
-pre-demonstration sets over the 10,000 procedural layouts of the 5x5 and 10x10 mazes), each
+Twenty datasets (expert states and random-policy pre-demonstrations for six environments,
+the mazes' start-cell pre-demonstrations of the authors' regime, expert and
+pre-demonstration sets over the 10,000 procedural layouts of the 5x5 and 10x10 mazes, and
+Acrobot pre-demonstrations of held random actions), each
 one HDF5 file in the versioned format of ``docs/format.md``. :func:`load` gets one from the
 cache, the Hugging Face Hub, or local generation; :func:`open_dataset` reads a file;
 :func:`verify` and :func:`check_dataset` check every byte of one. ``import abco_data`` does
@@ -11,7 +12,7 @@ not import torch.
 Example:
     >>> import abco_data
     >>> len(abco_data.DATASET_IDS)
-    19
+    20
     >>> abco_data.dataset_id("CartPole-v1", "pre_demonstrations")
     'abco/cartpole-pre-v0'
 """

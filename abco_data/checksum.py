@@ -81,6 +81,16 @@ def claimed_overrides(ds: Dataset) -> dict[str, Any]:
     out = {}
     for name in names:
         value, default = params[name], defaults.get(name)
+        if name == "hold":  # any hold costs the same to reproduce: only its shape is checked
+            from abco_envs.experts.random_policy import hold_range
+
+            try:
+                hold_range(value)
+            except ValueError:
+                raise CorruptDatasetError(f"{ds.path}: creation parameter hold={value!r} is"
+                                          f" not a valid variant of {ds.id}") from None
+            out[name] = value
+            continue
         same_type = type(value) is type(default)
         # A variant is never bigger than the published dataset: reproducing one costs at
         # most as much as generating the published one (the seed may be any integer).

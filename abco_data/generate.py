@@ -117,8 +117,8 @@ def _episodes(s: DatasetSpec, env: Any) -> Iterator[tuple[int, int, dict[str, An
     else:
         left, i = p["transitions"], 0
         while left > 0:
-            ep = record_episode(env, RandomPolicy(env.action_space, seed=seed + i),
-                                seed=seed + i, max_steps=left)
+            policy = RandomPolicy(env.action_space, seed=seed + i, hold=p.get("hold", 1))
+            ep = record_episode(env, policy, seed=seed + i, max_steps=left)
             left -= ep.length
             yield seed + i, -1, vars(ep)
             i += 1

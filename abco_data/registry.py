@@ -5,7 +5,8 @@ Ids read ``abco/{name}-{kind}-v0``: ``name`` is one of the six environments, ``k
 bytes of a dataset would. Two families more, for the mazes: ``abco/{maze}-pre-start-v0`` (the
 authors' start-cell pre-demonstrations) and, for 5x5 and 10x10,
 ``abco/{maze}-procedural-{kind}-v0``: 10,000 layouts of the procedural split
-(:mod:`abco_envs.maze.procedural`), disjoint from the pool's train and test splits.
+(:mod:`abco_envs.maze.procedural`), disjoint from the pool's train and test splits. One for
+Acrobot: ``abco/acrobot-pre-held-v0``, random actions each held for several steps.
 
 Example:
     >>> dataset_id("AbcoMaze5x5-v0", "expert")
@@ -27,7 +28,8 @@ from abco_data.errors import UnknownDatasetError
 from abco_envs.maze.procedural import PROCEDURAL_SPLIT_SIZE
 
 __all__ = ["DatasetSpec", "DATASET_IDS", "ENV_NAMES", "ACTION_COUNTS", "PROCEDURAL_ENVS",
-           "DATASET_SPLITS", "dataset_id", "procedural_dataset_id", "spec", "is_maze"]
+           "DATASET_SPLITS", "HELD_ENVS", "dataset_id", "procedural_dataset_id",
+           "held_dataset_id", "spec", "is_maze"]
 
 #: Short dataset name of each environment id.
 ENV_NAMES = {
@@ -85,6 +87,15 @@ DATASET_SPLITS = ("train", "procedural")
 _CLASSIC_EXPERT = {"episodes": 50, "reference_episodes": 100, "reference_expert_episodes": 20}
 _CLASSIC_PRE = {"transitions": 50_000, "reference_episodes": 100,
                 "reference_expert_episodes": 20}
+#: Held-action pre-demonstrations: each uniform random action is repeated for ``hold`` steps
+#: (an int, or ``[lo, hi]``: a length drawn per action, see ``RandomPolicy``). One-step
+#: random torques leave Acrobot near rest, while its expert swings fast: an IDM trained on
+#: them labels ~10% of the expert's pairs "zero torque". Held torques pump energy as the
+#: expert does (docs/results/progress-issue9.md). A parameter of these datasets only, so the
+#: ``-pre-`` datasets' stored parameters (and bytes) stay as they were.
+_CLASSIC_PRE_HELD = {**_CLASSIC_PRE, "hold": 4}
+#: The environments with a held-action dataset ``abco/{name}-pre-held-v0``.
+HELD_ENVS = ("Acrobot-v1",)
 
 
 @dataclass(frozen=True)
@@ -180,6 +191,23 @@ def procedural_dataset_id(env_id: str, kind: str) -> str:
     return f"abco/{ENV_NAMES[name]}-procedural-{suffix}-v{VERSION}"
 
 
+def held_dataset_id(env_id: str) -> str:
+    """The id of the held-action pre-demonstrations of ``env_id`` (Acrobot only).
+
+    Example:
+        >>> held_dataset_id("Acrobot-v1")
+        'abco/acrobot-pre-held-v0'
+
+    Raises:
+        UnknownDatasetError: No held-action dataset exists for ``env_id``.
+    """
+    name = abco_envs.env_name(env_id)
+    if name not in HELD_ENVS:
+        raise UnknownDatasetError(f"no held-action abco dataset for env {env_id!r}; envs with"
+                                  f" one: {', '.join(HELD_ENVS)}")
+    return f"abco/{ENV_NAMES[name]}-pre-held-v{VERSION}"
+
+
 def _build() -> dict[str, DatasetSpec]:
     specs = {}
     for i, (env_id, _name) in enumerate(ENV_NAMES.items()):
@@ -204,13 +232,18 @@ def _build() -> dict[str, DatasetSpec]:
         params = {**base, "seed": (first + k) * 1_000_000}
         ds_id = procedural_dataset_id(env_id, kind)
         specs[ds_id] = DatasetSpec(ds_id, env_id, kind, MappingProxyType(params))
+    first += 2 * len(PROCEDURAL_ENVS)  # after the procedural datasets
+    for k, env_id in enumerate(HELD_ENVS):
+        params = {**_CLASSIC_PRE_HELD, "seed": (first + k) * 1_000_000}
+        ds_id = held_dataset_id(env_id)
+        specs[ds_id] = DatasetSpec(ds_id, env_id, "pre_demonstrations", MappingProxyType(params))
     return specs
 
 
 _SPECS = _build()
 #: The dataset ids: the twelve of Table 1 (mazes first, expert before pre-demonstrations),
 #: then the mazes' start-cell pre-demonstrations of the authors' regime, then the procedural
-#: datasets (5x5 expert and pre, 10x10 expert and pre).
+#: datasets (5x5 expert and pre, 10x10 expert and pre), then the held-action ones (Acrobot).
 DATASET_IDS: tuple[str, ...] = tuple(_SPECS)
 
 

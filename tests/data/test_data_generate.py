@@ -60,6 +60,24 @@ def test_classic_datasets(tmp_path, dataset_id):
     assert ds.reference.expert_mean > ds.reference.random_mean
 
 
+def test_held_action_pre_demonstrations(tmp_path):
+    path = make_small("abco/acrobot-pre-held-v0", tmp_path)
+    ds = abco_data.open_dataset(path)
+    assert json.loads(ds.attrs["creation_params"])["hold"] == 4
+    for ep in ds.episodes():  # a fresh policy per episode: runs restart at its first step
+        cuts = np.flatnonzero(np.diff(ep.actions)) + 1
+        assert np.all(cuts % 4 == 0)  # a new action only every 4 steps
+    again = make_small("abco/acrobot-pre-held-v0", tmp_path, name="again.hdf5")
+    assert _sha(path) == _sha(again)
+    variant = make_small("abco/acrobot-pre-held-v0", tmp_path, name="v.hdf5", hold=[1, 3])
+    report = abco_data.verify(variant)  # a hold variant's bytes are reproduced and checked
+    assert report.num_transitions == 300
+    with h5py.File(variant, "r+") as f:
+        f.attrs["creation_params"] = f.attrs["creation_params"].replace("[1,3]", "[0,3]")
+    with pytest.raises(abco_data.CorruptDatasetError, match="hold"):
+        abco_data.verify(variant)
+
+
 def test_same_id_same_bytes(tmp_path):
     for dataset_id in ("abco/maze3x3-pre-v0", "abco/maze3x3-expert-v0",
                        "abco/cartpole-pre-v0"):

@@ -1,5 +1,5 @@
 """The registry of the dataset ids: twelve of Table 1, three start-cell pre-demonstrations,
-four procedural ones."""
+four procedural ones, one held-action set (Acrobot)."""
 
 import pytest
 
@@ -8,12 +8,13 @@ from abco_data.errors import UnknownDatasetError
 
 
 def test_twelve_ids_two_kinds_per_env():
-    assert len(abco_data.DATASET_IDS) == 19
-    assert len(set(abco_data.DATASET_IDS)) == 19
+    assert len(abco_data.DATASET_IDS) == 20
+    assert len(set(abco_data.DATASET_IDS)) == 20
     assert abco_data.DATASET_IDS[12:15] == tuple(f"abco/maze{n}x{n}-pre-start-v0"
                                                  for n in (3, 5, 10))
-    assert abco_data.DATASET_IDS[15:] == tuple(f"abco/maze{n}x{n}-procedural-{k}-v0"
-                                               for n in (5, 10) for k in ("expert", "pre"))
+    assert abco_data.DATASET_IDS[15:19] == tuple(f"abco/maze{n}x{n}-procedural-{k}-v0"
+                                                 for n in (5, 10) for k in ("expert", "pre"))
+    assert abco_data.DATASET_IDS[19:] == ("abco/acrobot-pre-held-v0",)
     for env_id in ("AbcoMaze3x3-v0", "AbcoMaze5x5-v0", "AbcoMaze10x10-v0", "CartPole-v1",
                    "Acrobot-v1", "MountainCar-v0"):
         for kind in ("expert", "pre_demonstrations"):
@@ -29,7 +30,21 @@ def test_id_spelling():
 
 def test_seeds_are_distinct():
     seeds = [abco_data.spec(i).params["seed"] for i in abco_data.DATASET_IDS]
-    assert len(set(seeds)) == 19
+    assert len(set(seeds)) == 20
+
+
+def test_held_action_dataset():
+    from abco_data.registry import held_dataset_id
+
+    s = abco_data.spec("abco/acrobot-pre-held-v0")
+    assert (s.env_id, s.kind) == ("Acrobot-v1", "pre_demonstrations")
+    plain = abco_data.spec("abco/acrobot-pre-v0").params
+    assert dict(s.params) == {**plain, "hold": 4, "seed": s.params["seed"]}
+    assert "hold" not in plain  # the -pre- datasets' parameters (and bytes) stay as they were
+    assert held_dataset_id("Acrobot-v1") == s.id
+    assert abco_data.dataset_id("Acrobot-v1", "pre") == "abco/acrobot-pre-v0"  # not a default
+    with pytest.raises(UnknownDatasetError, match="held-action"):
+        held_dataset_id("CartPole-v1")
 
 
 def test_unknown_id_lists_known_ones():

@@ -6,6 +6,7 @@ import pytest
 
 from abco_envs import MAZE_IDS, MAZE_SIZES, maze_size
 from abco_envs.experts import MazeExpert, RandomPolicy, expert_policy, record_episode
+from abco_envs.experts.random_policy import hold_range
 from abco_envs.maze.layout import DELTAS, shortest_path_length
 from abco_envs.maze.pool import layout_pool
 
@@ -62,6 +63,41 @@ def test_random_policy_is_seeded_and_uniform():
     assert np.allclose(np.bincount(draws, minlength=3) / 3000, 1 / 3, atol=0.03)
     with pytest.raises(TypeError, match="Discrete"):
         RandomPolicy(gym.spaces.Box(0, 1, (2,)))
+
+
+def _runs(actions):
+    """Lengths of the runs of equal consecutive actions."""
+    cuts = np.flatnonzero(np.diff(actions)) + 1
+    return np.diff(np.r_[0, cuts, len(actions)])
+
+
+def test_random_policy_holds_each_action():
+    space = gym.spaces.Discrete(3)
+    plain, one = RandomPolicy(space, seed=5), RandomPolicy(space, seed=5, hold=1)
+    assert [plain(None, {}) for _ in range(40)] == [one(None, {}) for _ in range(40)]
+    plain, four = RandomPolicy(space, seed=5), RandomPolicy(space, seed=5, hold=4)
+    held = [four(None, {}) for _ in range(40)]
+    assert held[::4] == [plain(None, {}) for _ in range(10)]  # hold=1's draws, each held
+    policy, again = RandomPolicy(space, seed=7, hold=4), RandomPolicy(space, seed=7, hold=4)
+    held = np.array([policy(None, {}) for _ in range(4000)])
+    assert np.array_equal(held, [again(None, {}) for _ in range(4000)])
+    assert np.all(held.reshape(-1, 4) == held[::4, None])  # 4 steps each, then a new draw
+    assert np.allclose(np.bincount(held, minlength=3) / 4000, 1 / 3, atol=0.04)
+
+
+def test_random_policy_draws_hold_lengths_in_range():
+    space = gym.spaces.Discrete(3)
+    policy, again = RandomPolicy(space, seed=3, hold=[2, 6]), RandomPolicy(space, seed=3,
+                                                                           hold=(2, 6))
+    draws = np.array([policy(None, {}) for _ in range(6000)])
+    assert np.array_equal(draws, [again(None, {}) for _ in range(6000)])
+    # a run of equal actions is one hold or several back to back: always at least 2 steps
+    runs = _runs(draws)[:-1]  # the last run may be cut
+    assert runs.min() >= 2 and set(range(2, 7)) <= set(runs.tolist())
+    for bad in (0, -1, True, 2.5, [3, 2], [0, 2], [1, 2, 3], "4"):
+        with pytest.raises(ValueError, match="hold"):
+            RandomPolicy(space, hold=bad)
+    assert hold_range(4) == (4, 4) and hold_range([1, 8]) == (1, 8)
 
 
 def test_record_episode_keeps_the_final_observation_and_caps_length():
