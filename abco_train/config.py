@@ -353,8 +353,9 @@ REGIME_DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
 
 #: Settings that may differ between a run and its resumption (and between a finished grid
 #: cell and a re-run of the grid): where things are, how loud, how many threads.
-RUNTIME_FIELDS = ("quiet", "run_dir", "cache_dir", "threads", "device", "expert_data", "pre_data",
-                  "plots", "plot_layouts")  # fmt: skip
+# The datasets (expert_data, pre_data) are part of a run's identity: a finished run asked for
+# with other data is another run, not a result to hand back.
+RUNTIME_FIELDS = ("quiet", "run_dir", "cache_dir", "threads", "device", "plots", "plot_layouts")
 
 
 def comparable(config: Mapping[str, Any]) -> dict[str, Any]:

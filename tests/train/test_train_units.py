@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -201,3 +203,17 @@ def test_performance_on_hand_made_returns():
     assert m["success_rate"] == pytest.approx(2 / 3)
     with pytest.raises(ValueError):
         performance(np.array([1.0]), 1.0, 1.0)
+
+
+def test_other_datasets_make_another_run(tmp_path):
+    """A finished run asked for with other pre-demonstrations is not handed back as a result."""
+    from abco_train.run_folder import config_differences, finished_result
+
+    (tmp_path / "config.json").write_text(json.dumps({"env": "Acrobot-v1", "pre_data": None}))
+    (tmp_path / "final.json").write_text(json.dumps({"status": "ok"}))
+    same = {"env": "Acrobot-v1", "pre_data": None, "run_dir": "elsewhere", "quiet": True}
+    held = {"env": "Acrobot-v1", "pre_data": "abco/acrobot-pre-held-v0"}
+    assert config_differences(tmp_path, same) == []
+    assert finished_result(tmp_path, same) == {"status": "ok"}
+    assert config_differences(tmp_path, held) == ["pre_data"]
+    assert finished_result(tmp_path, held) is None
