@@ -143,6 +143,7 @@ def test_ilpo_options(tiny_data, tmp_path):
     data = load_training_data(cfg)
     method = ILPO(cfg, data, seed_everything(0))
     assert method.k == data.n_actions == 3  # default: as many latents as actions
+    assert method.opts["remap_margin"] == 0.1  # classic control: only clearly explained steps
     assert method.interactions["pre_demonstration"] == 0
     cfg.method_options["latents"] = 5
     assert ILPO(cfg, data, seed_everything(0)).k == 5
