@@ -26,7 +26,17 @@ part of the paper lives here:
   ILPO minimises ``L_min + L_exp`` (:meth:`ILPO._train_latent_model`); as in the authors'
   code the predictions inside the expectation are held fixed, so ``L_exp`` trains ``pi`` and
   ``L_min`` trains ``G``. Option ``exp_weight`` lets that fraction of ``L_exp``'s gradient
-  reach ``G`` as well (default 0).
+  reach ``G`` as well (default 0). With ``exp_weight`` 0 the two losses share no parameter,
+  so training them together only makes ``pi`` chase a moving ``G``; option ``policy_steps``
+  (mazes: 1000; classic control: ``None``, the joint schedule) trains ``G`` alone for
+  ``train_steps`` steps first, then ``pi`` alone for ``policy_steps`` steps of ``L_exp``
+  against the trained, fixed ``G``: the same two losses, minimised one after the other. Why:
+  on the mazes, in the first ~100 joint steps ``G``'s latents mean nothing yet, ``L_exp``
+  drives ``pi`` onto whichever latent's prediction is nearest the mean change, in every
+  state; Adam keeps growing those logits while their gradient vanishes, ``pi``'s softmax
+  saturates (``max_z pi = 1.00``) and never leaves that latent, so the policy takes one
+  action everywhere (5x5 maze: validation seeds 103 and 106 of 100-107, grid seeds 1-3 of
+  0-3; docs/training.md). ``exp_weight`` does not apply in this schedule.
 * **Action remapping** (Sec. 3.3; :meth:`ILPO._collect`, :meth:`ILPO._fit_remap`): the agent
   acts in the environment, ``a = argmax_a P(a | s, z)`` for ``z = argmax_z pi(z | s)``
   (:meth:`ILPO.act`), epsilon-greedy; for every step ``(s, a, s')`` it finds the latent that
@@ -70,10 +80,12 @@ that state. ``latent_init="shared"`` starts every latent from one embedding plus
 
 Schedule (the harness calls :meth:`ILPO.train_iteration` for ``i = 0..iterations`` and
 evaluates greedily after each): iteration 0 trains ``G`` and ``pi`` for ``train_steps`` Adam
-steps (``--lr``, minibatches of ``--batch-size`` expert pairs), then takes the first
+steps (``--lr``, minibatches of ``--batch-size`` expert pairs; with ``policy_steps``, ``G``
+for ``train_steps`` then ``pi`` for ``policy_steps``), then takes the first
 ``remap_steps`` environment steps with uniformly random actions (no mapping exists yet, and
 every action gets tried) and fits the remapping; every later iteration may train ``G`` and
-``pi`` for ``later_steps`` more steps (default 0), takes ``remap_steps`` more environment
+``pi`` for ``later_steps`` more steps (default 0; with ``policy_steps``, ``G`` then ``pi``,
+``later_steps`` each), takes ``remap_steps`` more environment
 steps, epsilon-greedy (``remap_epsilon``) with the current mapping, and refits the
 remapping on all the kept steps so far (``remap_epochs`` epochs). The steps run in a vector
 env of ``remap_envs`` slots of their own (:func:`abco_train.evaluate.make_vector_env`, reset
@@ -83,13 +95,23 @@ episode ends is the env's reset, not a transition, and is neither kept nor count
 learns nothing from the evaluation runs (no post-demonstrations) and uses no
 pre-demonstrations (it counts none).
 
+Diagnostics (``metrics.jsonl``, every iteration, on the expert's states):
+``latent_usage`` (how often each latent is ``z*``), ``policy_latent_usage`` (how often each
+latent is ``argmax_z pi``), ``policy_latent_agreement`` (``argmax_z pi = z*``),
+``expert_label_accuracy`` (the inferred labels, the remapped ``z*`` that
+:meth:`ILPO.expert_labels` returns, against the true actions: it measures ``G`` and the
+remapping, not the policy) and ``policy_action_accuracy`` (what :meth:`ILPO.act`, the
+evaluated policy, does in the expert's states against the expert's actions). The true
+actions are a measurement only, never used for training or for a choice.
+
 Options (``--method-options``; defaults in :data:`OPTION_DEFAULTS` by env kind, then
 :data:`ENV_OPTION_DEFAULTS` by env, checked by :meth:`ILPO.options`): ``latents`` (``k``,
-default the env's number of actions), ``train_steps``, ``later_steps``, ``hidden``,
-``channels``, ``pool``, ``exp_weight``, ``relax``, ``latent_init``, ``split_noise``, ``remap``,
-``remap_input``, ``remap_steps``, ``remap_envs``, ``remap_epsilon``, ``remap_margin``,
-``remap_epochs``, ``remap_max_steps``. All randomness comes from the run's generator and from
-torch (seeded by the harness): the same seed gives the same run on CPU.
+default the env's number of actions), ``train_steps``, ``policy_steps``, ``later_steps``,
+``hidden``, ``channels``, ``pool``, ``exp_weight``, ``relax``, ``latent_init``,
+``split_noise``, ``remap``, ``remap_input``, ``remap_steps``, ``remap_envs``,
+``remap_epsilon``, ``remap_margin``, ``remap_epochs``, ``remap_max_steps``. All randomness
+comes from the run's generator and from torch (seeded by the harness): the same seed gives the
+same run on CPU.
 
 It is registered through :func:`abco_train.methods.register` like any plugin.
 """
@@ -121,19 +143,23 @@ __all__ = ["ILPO", "ILPONet", "VectorForwardModel", "ImageForwardModel", "latent
 #: better than the second best (``remap_margin`` 0.1, was 0.5): on Acrobot the latent model
 #: tells the torques apart in ~99% of the expert's states, but the steps it explains only 2-10
 #: times better than the next latent are noisy labels, and the remapping, not the model, was
-#: what lost accuracy (docs/training.md, validation seeds 100-102).
+#: what lost accuracy (docs/training.md, validation seeds 100-102). Mazes train ``pi`` after
+#: ``G`` (``policy_steps`` 1000; module docstring): trained together, ``pi`` saturated on one
+#: latent in most 5x5 seeds (docs/training.md, validation seeds 100-107).
 OPTION_DEFAULTS: dict[str, dict[str, Any]] = {
     "classic": {
-        "latents": None, "train_steps": 3000, "later_steps": 0, "hidden": 64, "channels": 16,
-        "pool": 1, "exp_weight": 0.0, "relax": 0.0, "latent_init": "random",
-        "split_noise": 0.01, "remap": "state", "remap_input": "effect+embedding",
+        "latents": None, "train_steps": 3000, "policy_steps": None, "later_steps": 0,
+        "hidden": 64, "channels": 16, "pool": 1, "exp_weight": 0.0, "relax": 0.0,
+        "latent_init": "random", "split_noise": 0.01, "remap": "state",
+        "remap_input": "effect+embedding",
         "remap_steps": 500, "remap_envs": 10, "remap_epsilon": 0.2, "remap_margin": 0.1,
         "remap_epochs": 20, "remap_max_steps": None,
     },
     "maze": {
-        "latents": None, "train_steps": 1300, "later_steps": 0, "hidden": 128, "channels": 16,
-        "pool": 4, "exp_weight": 0.0, "relax": 0.0, "latent_init": "random",
-        "split_noise": 0.01, "remap": "state", "remap_input": "effect+embedding",
+        "latents": None, "train_steps": 1300, "policy_steps": 1000, "later_steps": 0,
+        "hidden": 128, "channels": 16, "pool": 4, "exp_weight": 0.0, "relax": 0.0,
+        "latent_init": "random", "split_noise": 0.01, "remap": "state",
+        "remap_input": "effect+embedding",
         "remap_steps": 1000, "remap_envs": 50, "remap_epsilon": 0.2, "remap_margin": 0.5,
         "remap_epochs": 20, "remap_max_steps": None,
     },
@@ -366,6 +392,11 @@ class ILPO(Method):
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise ConfigError(f"ilpo option {key} must be an integer >= {low}, "
                                   f"got {value!r}")  # fmt: skip
+        steps = opts["policy_steps"]
+        if steps is not None and (not isinstance(steps, int) or isinstance(steps, bool)
+                                  or steps < 1):  # fmt: skip
+            raise ConfigError(f"ilpo option policy_steps must be null (train pi with G) or "
+                              f"an integer >= 1, got {steps!r}")  # fmt: skip
         for key in ("exp_weight", "relax", "remap_epsilon", "split_noise"):
             if not isinstance(opts[key], (int, float)) or not 0.0 <= float(opts[key]) <= 1.0:
                 raise ConfigError(f"ilpo option {key} must be in [0, 1], got {opts[key]!r}")
@@ -467,9 +498,13 @@ class ILPO(Method):
                 done += 1
                 yield order[start : start + batch_size]
 
-    def _train_latent_model(self, steps: int) -> dict[str, float]:
-        """``steps`` Adam steps of ``L_min + L_exp`` on minibatches of the expert pairs; the
-        mean losses of the last (up to) 100 steps."""
+    def _train_latent_model(self, steps: int, policy_steps: int | None = None
+                            ) -> dict[str, float]:  # fmt: skip
+        """``steps`` Adam steps of ``L_min + L_exp`` on minibatches of the expert pairs, or
+        (``policy_steps`` not ``None``) ``steps`` of ``L_min`` then ``policy_steps`` of
+        ``L_exp`` against the fixed ``G``; the mean losses of the last (up to) 100 steps."""
+        if policy_steps is not None:
+            return self._train_in_turn(steps, policy_steps)
         w, relax = float(self.opts["exp_weight"]), float(self.opts["relax"])
         self.net.train()
         recent: list[tuple[float, float]] = []
@@ -485,6 +520,38 @@ class ILPO(Method):
             recent = [*recent[-99:], (loss_min.item(), loss_exp.item())]
         mean = np.mean(recent, axis=0) if recent else (float("nan"), float("nan"))
         return {"loss_min": float(mean[0]), "loss_exp": float(mean[1]), "train_steps": steps}
+
+    def _train_in_turn(self, steps: int, policy_steps: int) -> dict[str, float]:
+        """``G`` alone for ``steps`` steps of ``L_min``, then ``pi`` alone for
+        ``policy_steps`` steps of ``L_exp`` against the trained ``G`` (option
+        ``policy_steps``). One Adam optimiser: parameters without a gradient are skipped."""
+        relax = float(self.opts["relax"])
+        model, policy = self.net.forward_model, self.net.policy
+        self.net.train()
+        recent_min: list[float] = []
+        for idx in self._batches(len(self.expert_t), steps, self.config.batch_size):
+            obs = self.expert_obs[self.expert_t[idx]].to(self.device)
+            _, pred = model(obs)
+            loss_min, _ = min_over_latents_loss(pred, self.expert_targets[idx].to(self.device),
+                                                relax)  # fmt: skip
+            self.opt.zero_grad(set_to_none=True)
+            loss_min.backward()
+            self.opt.step()
+            recent_min = [*recent_min[-99:], loss_min.item()]
+        recent_exp: list[float] = []
+        for idx in self._batches(len(self.expert_t), policy_steps, self.config.batch_size):
+            obs = self.expert_obs[self.expert_t[idx]].to(self.device)
+            with torch.no_grad():
+                _, pred = model(obs)
+            target = self.expert_targets[idx].to(self.device)
+            loss_exp = expected_prediction_loss(policy(obs).softmax(1), pred, target)
+            self.opt.zero_grad(set_to_none=True)
+            loss_exp.backward()
+            self.opt.step()
+            recent_exp = [*recent_exp[-99:], loss_exp.item()]
+        return {"loss_min": float(np.mean(recent_min)) if recent_min else float("nan"),
+                "loss_exp": float(np.mean(recent_exp)) if recent_exp else float("nan"),
+                "train_steps": steps, "policy_steps": policy_steps}  # fmt: skip
 
     @torch.no_grad()
     def _latents_of(self, s: torch.Tensor, s1: torch.Tensor, batch: int = 512
@@ -613,8 +680,11 @@ class ILPO(Method):
             steps = int(self.opts["train_steps"])
         else:
             steps = int(self.opts["later_steps"])
+        policy_steps = self.opts["policy_steps"]
+        if policy_steps is not None and iteration > 0:
+            policy_steps = steps
         if steps:
-            stats.update(self._train_latent_model(steps))
+            stats.update(self._train_latent_model(steps, policy_steps))
         epsilon = 1.0 if self.remap_phases == 0 else float(self.opts["remap_epsilon"])
         if int(self.opts["remap_steps"]) > 0:
             stats.update(self._collect(epsilon))
@@ -624,21 +694,28 @@ class ILPO(Method):
         return stats
 
     def _expert_statistics(self) -> dict[str, Any]:
-        """Latent usage, policy agreement and the inferred expert actions (``labels``); their
-        accuracy against the expert's true actions is a measurement only, never a label."""
+        """Diagnostics on the expert's states (module docstring) and the inferred expert
+        actions (``labels``, the remapped ``z*``). ``expert_label_accuracy`` scores those
+        labels, ``policy_action_accuracy`` what :meth:`act` does (the remapped
+        ``argmax_z pi``); the true actions are a measurement only, never a label."""
         s, s1 = self.expert_obs[self.expert_t], self.expert_obs[self.expert_t + 1]
         z, _, chosen = self._latents_of(s, s1)
-        labels = []
+        labels, acted = [], []
         for start in range(0, len(z), 512):
             obs = s[start : start + 512].to(self.device)
             labels.append(self._remap(obs, z[start : start + 512].to(self.device)).cpu())
-        self.labels = torch.cat(labels).numpy() if labels else np.zeros(0, dtype=np.int64)
-        usage = np.bincount(z.numpy(), minlength=self.k) / max(len(z), 1)
+            acted.append(self._remap(obs, chosen[start : start + 512].to(self.device)).cpu())
+        empty = np.zeros(0, dtype=np.int64)
+        self.labels = torch.cat(labels).numpy() if labels else empty
+        actions = torch.cat(acted).numpy() if acted else empty
+        truth = self.data.expert_eval_actions
+        n = max(len(z), 1)
         return {
-            "latent_usage": usage.tolist(),
+            "latent_usage": (np.bincount(z.numpy(), minlength=self.k) / n).tolist(),
+            "policy_latent_usage": (np.bincount(chosen.numpy(), minlength=self.k) / n).tolist(),
             "policy_latent_agreement": float((chosen == z).float().mean()) if len(z) else 0.0,
-            "expert_label_accuracy": float((self.labels == self.data.expert_eval_actions).mean())
-            if len(z) else 0.0,
+            "expert_label_accuracy": float((self.labels == truth).mean()) if len(z) else 0.0,
+            "policy_action_accuracy": float((actions == truth).mean()) if len(z) else 0.0,
         }  # fmt: skip
 
     # -- acting, labels, state -------------------------------------------------------------------

@@ -21,8 +21,13 @@ ENVS = (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
 TINY = {"train_steps": 4, "remap_steps": 24, "remap_envs": 4, "remap_epochs": 2}
 
 
+#: Mazes train pi after G (``policy_steps``): a few steps of each.
+TINY_MAZE = {"policy_steps": 4}
+
+
 def _config(env_id, tiny_data, run_dir, **changes):
-    return tiny_config(env_id, "ilpo", tiny_data, run_dir, method_options=dict(TINY),
+    options = {**TINY, **(TINY_MAZE if env_id in abco_envs.MAZE_IDS else {})}
+    return tiny_config(env_id, "ilpo", tiny_data, run_dir, method_options=options,
                        device="cpu", **changes)  # fmt: skip
 
 
@@ -165,3 +170,80 @@ def test_act_is_the_remapped_argmax_latent(tiny_data, tmp_path):
     assert (method.act(obs) == 0).all()
     method.remap_counts[:] = [[0, 3], [1, 7]]
     assert (method.act(obs) == 1).all()
+
+
+# -- pi trained after G (policy_steps), and what the diagnostics measure ---------------------
+
+
+def _method(env_id, tiny_data, tmp_path, **options):
+    cfg = resolve_config(_config(env_id, tiny_data, tmp_path))
+    cfg.method_options.update(options)
+    return ILPO(cfg, load_training_data(cfg), seed_everything(0))
+
+
+def test_policy_steps_defaults_and_checks(tiny_data, tmp_path):
+    cfg = resolve_config(_config("AbcoMaze5x5-v0", tiny_data, tmp_path))
+    data = load_training_data(cfg)
+    cfg.method_options.pop("policy_steps")
+    assert ILPO(cfg, data, seed_everything(0)).opts["policy_steps"] == 1000  # mazes: in turn
+    assert _method("Acrobot-v1", tiny_data, tmp_path).opts["policy_steps"] is None  # joint
+    for bad in (0, -3, 2.5, True, "10"):
+        with pytest.raises(ConfigError, match="policy_steps"):
+            ILPO(cfg.replace(method_options={"policy_steps": bad}), data, seed_everything(0))
+
+
+def _snapshot(module):
+    return [p.detach().clone() for p in module.parameters()]
+
+
+def _changed(module, before):
+    return any(not torch.equal(p, q) for p, q in zip(module.parameters(), before, strict=True))
+
+
+def test_policy_steps_trains_g_then_pi_against_the_fixed_g(tiny_data, tmp_path):
+    method = _method("AbcoMaze3x3-v0", tiny_data, tmp_path)
+    g, pi = method.net.forward_model, method.net.policy
+    g0, pi0 = _snapshot(g), _snapshot(pi)
+    stats = method._train_latent_model(5, 1)  # G five steps, pi one
+    assert stats["train_steps"] == 5 and stats["policy_steps"] == 1
+    assert _changed(g, g0) and _changed(pi, pi0)
+    # the G phase leaves pi alone and the pi phase leaves G alone
+    method = _method("AbcoMaze3x3-v0", tiny_data, tmp_path)
+    g, pi = method.net.forward_model, method.net.policy
+    pi0 = _snapshot(pi)
+    calls = []
+    real_step = method.opt.step
+
+    def step():
+        calls.append((_snapshot(g), _snapshot(pi)))
+        real_step()
+
+    method.opt.step = step
+    method._train_latent_model(3, 2)
+    calls.append((_snapshot(g), _snapshot(pi)))
+    for before, after in zip(calls[:3], calls[1:4], strict=True):  # G phase: pi unchanged
+        assert all(torch.equal(p, q) for p, q in zip(before[1], after[1], strict=True))
+    for before, after in zip(calls[3:5], calls[4:6], strict=True):  # pi phase: G unchanged
+        assert all(torch.equal(p, q) for p, q in zip(before[0], after[0], strict=True))
+        assert any(not torch.equal(p, q) for p, q in zip(before[1], after[1], strict=True))
+
+
+def test_policy_action_accuracy_scores_what_act_does(tiny_data, tmp_path):
+    method = _method("CartPole-v1", tiny_data, tmp_path, remap="table")
+    head = method.net.policy[-1]
+    with torch.no_grad():  # a broken latent policy: latent 1 in every state
+        head.weight.zero_()
+        head.bias.copy_(torch.tensor([0.0, 5.0]))
+    method.remap_counts[:] = [[9, 0], [0, 9]]  # latent 0 is action 0, latent 1 action 1
+    stats = method._expert_statistics()
+    s = method.expert_obs[method.expert_t].numpy()
+    truth = method.data.expert_eval_actions
+    assert stats["policy_latent_usage"] == [0.0, 1.0]
+    assert (method.act(s) == 1).all()
+    assert stats["policy_action_accuracy"] == pytest.approx(float((truth == 1).mean()))
+    # the inferred labels go through z*, not through pi: they may look healthy regardless
+    labels = method.expert_labels()
+    assert stats["expert_label_accuracy"] == pytest.approx(float((labels == truth).mean()))
+    z, _, _ = method._latents_of(method.expert_obs[method.expert_t],
+                                 method.expert_obs[method.expert_t + 1])  # fmt: skip
+    assert (labels == z.numpy()).all()
