@@ -259,3 +259,18 @@ def test_report_without_rliable(synthetic: Path, tmp_path: Path,
     with (tmp_path / "results.csv").open() as f:
         rows = list(csv.DictReader(f))
     assert rows and not any(r["table"] == "aggregate" for r in rows)
+
+
+def test_partial_grid_under_the_wall_goal_is_not_met(synthetic: Path, tmp_path: Path) -> None:
+    """A grid with cells still to run cannot have met the wall-time goal (only be over it)."""
+    import shutil
+
+    root = tmp_path / "runs"
+    shutil.copytree(synthetic, root)
+    (root / "bench_log.jsonl").write_text(json.dumps(
+        {"started": "x", "wall_s": 3600.0, "ran": 1, "skipped": 0, "failed": []}) + "\n")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(aggregate, "REPS", 50)
+        md = write_report(root, tmp_path / "out")["report"].read_text()
+    assert "Grid wall time so far 60.0 min" in md and "**not decided**" in md
+    assert ": met." not in md.split("## Goals")[1].split("##")[0]
