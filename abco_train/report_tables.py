@@ -313,6 +313,17 @@ def wall(runs_dir: Path, grid: Grid) -> tuple[float | None, list[str]]:
              f" ({_fmt(wall_s / 3600 if wall_s is not None else None, 2)} h) over {len(ran)}"
              " `abco bench` session(s) that ran cells.",
              f"- Sum of the cells' own wall times: {cell_wall:.1f} s over {len(grid.done)} cells."]
+    # Cells copied in from another run folder (their row names it: ``reused_from``) ran in
+    # no session of this log; their own time, spread over the sessions' jobs, is added.
+    reused = [r for r in grid.done if r.row.get("reused_from")]
+    if reused and wall_s is not None:
+        jobs = max([int(s.get("jobs") or 1) for s in ran] or [1])
+        own = float(sum(r.row.get("wall_s") or 0.0 for r in reused))
+        wall_s += own / jobs
+        lines.append(f"- {_cells(len(reused))} ran outside these sessions (`reused_from` in"
+                     f" results.jsonl): {own:.1f} s of their own wall time, {own / jobs:.1f} s"
+                     f" at {jobs} job(s) at once, counted in the grid's wall time"
+                     f" ({wall_s:.1f} s, {wall_s / 3600:.2f} h).")  # fmt: skip
     for s in ran:
         lines.append(f"  - {s.get('started')}: {s['wall_s']:.1f} s, backend {s.get('backend')},"
                      f" jobs {s.get('jobs')}, threads {s.get('threads')}, ran {s.get('ran')},"

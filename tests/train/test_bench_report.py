@@ -274,3 +274,23 @@ def test_partial_grid_under_the_wall_goal_is_not_met(synthetic: Path, tmp_path: 
         md = write_report(root, tmp_path / "out")["report"].read_text()
     assert "Grid wall time so far 60.0 min" in md and "**not decided**" in md
     assert ": met." not in md.split("## Goals")[1].split("##")[0]
+
+
+def test_reused_cells_count_in_the_wall_time(synthetic: Path, tmp_path: Path) -> None:
+    """Cells copied in from another run folder (``reused_from``) ran in no logged session:
+    their own time, over the sessions' jobs, is added before the goal is judged."""
+    import shutil
+
+    root = tmp_path / "runs"
+    shutil.copytree(synthetic, root)
+    rows = [json.loads(x) for x in (root / "results.jsonl").read_text().splitlines()]
+    rows[0].update(reused_from="/elsewhere", wall_s=7200.0)
+    (root / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    (root / "bench_log.jsonl").write_text(json.dumps(
+        {"started": "x", "wall_s": 3.5 * 3600, "ran": 1, "skipped": 0, "failed": [], "jobs": 2}
+    ) + "\n")  # fmt: skip
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(aggregate, "REPS", 50)
+        md = write_report(root, tmp_path / "out")["report"].read_text()
+    assert "1 cell ran outside these sessions" in md and "3600.0 s at 2 job(s)" in md
+    assert "Grid wall time 270.0 min" in md and "**over by 30.0 min**" in md
