@@ -9,8 +9,9 @@ has one more level, ``OUT/{env}/{method}/layouts{K}/seed{seed}``:
   resumes it; a cell with a ``checkpoint.pt`` but no ``final.json`` resumes through the
   trainer's own resuming;
 * finished cells are collected, one JSON line per cell, in ``OUT/results.jsonl`` (rewritten
-  atomically after every cell; the latest row of a cell wins), and every invocation appends
-  its wall time to ``OUT/bench_log.jsonl``.
+  atomically after every cell; the latest row of a cell wins), and every invocation keeps
+  its line in ``OUT/bench_log.jsonl`` (written at its start, rewritten after every cell and
+  at its end, so a killed session still leaves its time up to its last finished cell).
 
 The backends that run the cells (local processes, Ray) are in :mod:`abco_train.backends`;
 the command line is in :mod:`abco_train.cli`. A cell's numbers depend only on its config
@@ -339,6 +340,22 @@ def run_grid(
     t0 = time.perf_counter()
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
     failed: list[str] = []
+    ran = 0
+    # This session's line in bench_log.jsonl is written now and rewritten after every cell,
+    # so a session killed mid-grid still leaves its time up to its last finished cell.
+    log_line = len(_read_lines(out / BENCH_LOG))
+
+    def log(finished: bool) -> dict[str, Any]:
+        summary = {
+            "started": started, "wall_s": time.perf_counter() - t0, "backend": backend,
+            "jobs": jobs or local_jobs, "threads": threads, "cells": len(cells), "ran": ran,
+            "skipped": len(cells) - len(todo), "failed": failed, "finished": finished,
+            "argv": sys.argv[1:], "results": str(out / RESULTS_FILE),
+        }  # fmt: skip
+        _write_log_line(out / BENCH_LOG, log_line, summary)
+        return summary
+
+    log(False)
     bar = tqdm(total=len(cells), initial=len(cells) - len(todo), desc="abco bench", unit="cell",
                disable=quiet)  # fmt: skip
     runner = (
@@ -357,6 +374,7 @@ def run_grid(
             rows[cell.key] = row
             _write_results(out, rows)
             bar.update(1)
+            ran += int(row["status"] == "done")
             if row["status"] != "done":
                 failed.append(cell.key)
                 why = row.get("error") or (row.get("final") or {}).get("message")
@@ -365,21 +383,30 @@ def run_grid(
                 score = headline(row["final"])
                 bar.write(f"{cell.key}: P={score['performance']:.3f} AER={score['aer']:.3f}"
                           f" in {row['wall_s']:.1f}s")  # fmt: skip
+            log(False)
     bar.close()
-    wall = time.perf_counter() - t0
-    summary = {
-        "started": started, "wall_s": wall, "backend": backend, "jobs": jobs or local_jobs,
-        "threads": threads, "cells": len(cells), "ran": len(todo) - len(failed),
-        "skipped": len(cells) - len(todo), "failed": failed, "argv": sys.argv[1:],
-        "results": str(out / RESULTS_FILE),
-    }  # fmt: skip
-    with (out / BENCH_LOG).open("a") as f:
-        f.write(json.dumps(summary) + "\n")
+    summary = log(True)
+    wall = summary["wall_s"]
     if not quiet:
         cell_s = sum(rows[cells[todo[i]].key].get("wall_s") or 0.0 for i in range(len(todo)))
         print(f"{summary['ran']} cells run, {summary['skipped']} skipped, {len(failed)} failed;"
               f" wall {wall:.1f}s (cells {cell_s:.1f}s); results: {summary['results']}")
     return summary
+
+
+def _read_lines(path: Path) -> list[str]:
+    return [x for x in path.read_text().splitlines() if x.strip()] if path.exists() else []
+
+
+def _write_log_line(path: Path, index: int, summary: dict[str, Any]) -> None:
+    """Put ``summary`` at line ``index`` of the bench log (appended if the log is shorter):
+    written to a temporary file, then renamed, so the log is never half-written."""
+    lines = _read_lines(path)
+    line = json.dumps(summary)
+    lines = [*lines[:index], line, *lines[index + 1:]] if index < len(lines) else [*lines, line]
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text("\n".join(lines) + "\n")
+    os.replace(tmp, path)
 
 
 def headline(final: dict[str, Any]) -> dict[str, float]:

@@ -325,9 +325,11 @@ def wall(runs_dir: Path, grid: Grid) -> tuple[float | None, list[str]]:
                      f" at {jobs} job(s) at once, counted in the grid's wall time"
                      f" ({wall_s:.1f} s, {wall_s / 3600:.2f} h).")  # fmt: skip
     for s in ran:
+        stopped = (", stopped before its end (its time up to its last finished cell)"
+                   if s.get("finished") is False else "")  # fmt: skip
         lines.append(f"  - {s.get('started')}: {s['wall_s']:.1f} s, backend {s.get('backend')},"
                      f" jobs {s.get('jobs')}, threads {s.get('threads')}, ran {s.get('ran')},"
-                     f" skipped {s.get('skipped')}, failed {len(s.get('failed', []))}")
+                     f" skipped {s.get('skipped')}, failed {len(s.get('failed', []))}{stopped}")
     return wall_s, lines
 
 

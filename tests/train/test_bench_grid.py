@@ -186,3 +186,27 @@ def test_results_rebuilt_from_run_folders(grid: dict[str, Any]) -> None:
         assert row["status"] == "done" and row["wall_s"] is None
         assert row["final"] == json.loads((cell.run_dir(out) / "final.json").read_text())
         assert row["reference"]["expert"] == 500.0
+
+
+def test_a_killed_session_leaves_its_time(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+                                          ) -> None:  # fmt: skip
+    """The session's log line is written before the first cell and after every cell, so a
+    grid stopped mid-way keeps its time up to its last finished cell (and the earlier lines)."""
+    out = tmp_path / "runs"
+    out.mkdir()
+    earlier = {"started": "earlier", "wall_s": 1.0, "ran": 1, "skipped": 0, "failed": []}
+    (out / bench.BENCH_LOG).write_text(json.dumps(earlier) + "\n")
+
+    def one_cell_then_killed(work: Any, tasks: list[dict[str, Any]], plugins: Any, jobs: int
+                             ) -> Any:  # fmt: skip
+        yield 0, work(tasks[0], tuple(plugins))
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(bench.backends, "run_local", one_cell_then_killed)
+    with pytest.raises(KeyboardInterrupt):
+        bench.run_grid(CELLS[:2], out, overrides=tiny_overrides(tmp_path / "data"), jobs=1,
+                       threads=1, quiet=True)  # fmt: skip
+    log = [json.loads(x) for x in (out / bench.BENCH_LOG).read_text().splitlines()]
+    assert len(log) == 2 and log[0] == earlier
+    assert log[1]["finished"] is False and log[1]["ran"] == 1 and log[1]["wall_s"] > 0
+    assert bench.read_results(out)[CELLS[0].key]["status"] == "done"

@@ -286,11 +286,13 @@ def test_reused_cells_count_in_the_wall_time(synthetic: Path, tmp_path: Path) ->
     rows = [json.loads(x) for x in (root / "results.jsonl").read_text().splitlines()]
     rows[0].update(reused_from="/elsewhere", wall_s=7200.0)
     (root / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
-    (root / "bench_log.jsonl").write_text(json.dumps(
-        {"started": "x", "wall_s": 3.5 * 3600, "ran": 1, "skipped": 0, "failed": [], "jobs": 2}
-    ) + "\n")  # fmt: skip
+    (root / "bench_log.jsonl").write_text("".join(json.dumps(x) + "\n" for x in (
+        {"started": "x", "wall_s": 3.5 * 3600, "ran": 1, "skipped": 0, "failed": [], "jobs": 2},
+        {"started": "y", "wall_s": 0.0, "ran": 1, "skipped": 0, "failed": [], "jobs": 2,
+         "finished": False})))  # fmt: skip
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(aggregate, "REPS", 50)
         md = write_report(root, tmp_path / "out")["report"].read_text()
     assert "1 cell ran outside these sessions" in md and "3600.0 s at 2 job(s)" in md
     assert "Grid wall time 270.0 min" in md and "**over by 30.0 min**" in md
+    assert md.count("stopped before its end") == 1
