@@ -399,14 +399,11 @@ def _read_lines(path: Path) -> list[str]:
 
 
 def _write_log_line(path: Path, index: int, summary: dict[str, Any]) -> None:
-    """Put ``summary`` at line ``index`` of the bench log (appended if the log is shorter):
-    written to a temporary file, then renamed, so the log is never half-written."""
+    """Put ``summary`` at line ``index`` of the bench log (appended if the log is shorter),
+    atomically, so the log is never half-written."""
     lines = _read_lines(path)
-    line = json.dumps(summary)
-    lines = [*lines[:index], line, *lines[index + 1:]] if index < len(lines) else [*lines, line]
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text("\n".join(lines) + "\n")
-    os.replace(tmp, path)
+    lines[index:index + 1] = [json.dumps(summary)]
+    write_atomic(path, "\n".join(lines) + "\n")
 
 
 def headline(final: dict[str, Any]) -> dict[str, float]:

@@ -313,6 +313,12 @@ def wall(runs_dir: Path, grid: Grid) -> tuple[float | None, list[str]]:
              f" ({_fmt(wall_s / 3600 if wall_s is not None else None, 2)} h) over {len(ran)}"
              " `abco bench` session(s) that ran cells.",
              f"- Sum of the cells' own wall times: {cell_wall:.1f} s over {len(grid.done)} cells."]
+    for s in ran:
+        stopped = (", stopped before its end (its time up to its last finished cell)"
+                   if s.get("finished") is False else "")  # fmt: skip
+        lines.append(f"  - {s.get('started')}: {s['wall_s']:.1f} s, backend {s.get('backend')},"
+                     f" jobs {s.get('jobs')}, threads {s.get('threads')}, ran {s.get('ran')},"
+                     f" skipped {s.get('skipped')}, failed {len(s.get('failed', []))}{stopped}")
     # Cells copied in from another run folder (their row names it: ``reused_from``) ran in
     # no session of this log; their own time, spread over the sessions' jobs, is added.
     reused = [r for r in grid.done if r.row.get("reused_from")]
@@ -324,12 +330,6 @@ def wall(runs_dir: Path, grid: Grid) -> tuple[float | None, list[str]]:
                      f" results.jsonl): {own:.1f} s of their own wall time, {own / jobs:.1f} s"
                      f" at {jobs} job(s) at once, counted in the grid's wall time"
                      f" ({wall_s:.1f} s, {wall_s / 3600:.2f} h).")  # fmt: skip
-    for s in ran:
-        stopped = (", stopped before its end (its time up to its last finished cell)"
-                   if s.get("finished") is False else "")  # fmt: skip
-        lines.append(f"  - {s.get('started')}: {s['wall_s']:.1f} s, backend {s.get('backend')},"
-                     f" jobs {s.get('jobs')}, threads {s.get('threads')}, ran {s.get('ran')},"
-                     f" skipped {s.get('skipped')}, failed {len(s.get('failed', []))}{stopped}")
     return wall_s, lines
 
 
