@@ -41,7 +41,10 @@ its policy for as many epochs as the iterative ones do over all their iterations
 ``policy_epochs * (first_epochs_factor + iterations)``, so no baseline is behind on epochs.
 With ``min_updates`` (the ``general`` preset's), ``policy_epochs`` and ``idm_epochs`` are first
 raised on small data until one such unit makes at least that many minibatch updates (the
-first K layouts of the procedural datasets range from 850 to 84,000 expert transitions).
+first K layouts of the procedural datasets range from 850 to 84,000 expert transitions);
+with ``max_updates`` (the ``general`` preset's too) a policy unit makes at most that many, so
+every K trains its policy for the same number of updates (the IDM's set is ``idm_samples``
+for every K already).
 
 Variants (switches of one implementation, see :data:`VARIANTS`): ``bc`` (policy on the true
 expert actions), ``bco`` (BCO(0): IDM on ``I_pre`` once), ``bco-alpha`` (IDM re-trained on all
@@ -135,21 +138,27 @@ def _fit(
     quiet: bool = True,
     device: torch.device | None = None,
     augment: bool = False,
+    max_batches: int | None = None,
 ) -> float:
     """Cross-entropy epochs over ``labels``; ``inputs(idx) -> args of net`` (CPU tensors,
     moved batch by batch to ``device``); ``augment``: :func:`transpose_batch` on each
-    minibatch. Mean loss of the last epoch."""
+    minibatch; ``max_batches``: stop after that many updates. Mean loss of the last epoch."""
     from tqdm.auto import tqdm
 
     net.train()
     n, loss_sum, seen = len(labels), 0.0, 0
     batches = -(-n // batch_size)
-    bar = tqdm(total=epochs * batches, desc=desc, leave=False, disable=quiet, unit="batch")
+    total = epochs * batches if max_batches is None else min(epochs * batches, max_batches)
+    bar = tqdm(total=total, desc=desc, leave=False, disable=quiet, unit="batch")
+    done = 0  # not bar.n: a disabled bar counts nothing
     for _ in range(epochs):
         order = torch.from_numpy(rng.permutation(n))
         loss_sum, seen = 0.0, 0
         for start in range(0, n, batch_size):
+            if done >= total:
+                break
             bar.update(1)
+            done += 1
             idx = order[start : start + batch_size]
             batch, targets = list(inputs(idx)), labels[idx]
             if augment:
@@ -271,8 +280,8 @@ class ABCO(Method):
         cfg, stats = self.config, {}
         boost = cfg.first_epochs_factor if iteration == 0 else 1
         # One-iteration variants get the iterative ones' whole policy budget (equal epochs).
-        policy_epochs = self._floored(cfg.policy_epochs, len(self.expert_t)) * (
-            boost if self.iterative else cfg.first_epochs_factor + cfg.iterations)
+        units = boost if self.iterative else cfg.first_epochs_factor + cfg.iterations
+        policy_epochs, policy_updates = self._policy_budget(units)
         expert_n = len(self.expert_t)
         true = torch.from_numpy(self.data.expert_eval_actions)
         if self.idm_data is None:  # BC: the supervised reference, true expert actions
@@ -288,13 +297,26 @@ class ABCO(Method):
         stats["policy_loss"] = _fit(
             self.policy, self.policy_opt, lambda idx: (self.expert_obs[self.expert_t[idx]],),
             labels, policy_epochs, cfg.batch_size, self.rng, "policy", cfg.quiet, self.device,
-            self.augment,
+            self.augment, policy_updates,
         )  # fmt: skip
         stats["policy_epochs"] = policy_epochs
+        stats["policy_updates"] = policy_updates
         predicted = _predict(self.policy, lambda idx: (self.expert_obs[self.expert_t[idx]],),
                              expert_n, device=self.device)  # fmt: skip
         stats["policy_label_accuracy"] = float((predicted == labels).float().mean())
         return stats
+
+    def _policy_budget(self, units: int) -> tuple[int, int]:
+        """Epochs and minibatch updates of ``units`` policy units: ``policy_epochs`` each
+        (floored with ``min_updates``), a unit cut to ``max_updates`` updates where one makes
+        more (the last epoch then stops part-way)."""
+        per_epoch = -(-len(self.expert_t) // self.config.batch_size)
+        epochs = self._floored(self.config.policy_epochs, len(self.expert_t))
+        per_unit = epochs * per_epoch
+        if self.config.max_updates:
+            per_unit = min(per_unit, self.config.max_updates)
+        updates = units * per_unit
+        return -(-updates // max(per_epoch, 1)), updates
 
     def _floored(self, epochs: int, examples: int) -> int:
         """``epochs`` raised, with ``min_updates``, until they make that many minibatches."""

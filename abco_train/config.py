@@ -42,8 +42,8 @@ import abco_envs
 
 __all__ = [
     "RunConfig", "ConfigError", "DEFAULTS", "ENV_DEFAULTS", "RUNTIME_FIELDS", "PRESETS",
-    "PROTOCOLS", "ARCHS", "ARCHS_BY_KIND", "DEVICES", "IDM_INPUTS", "REGIMES", "AUGMENTS",
-    "REGIME_DEFAULTS", "LAYOUT_DEFAULTS", "PROCEDURAL_ENVS",
+    "PROTOCOLS", "ARCHS", "CELL_ARCHS", "ARCHS_BY_KIND", "DEVICES", "IDM_INPUTS", "REGIMES",
+    "AUGMENTS", "REGIME_DEFAULTS", "LAYOUT_DEFAULTS", "PROCEDURAL_ENVS",
     "MAX_LAYOUTS", "env_kind", "known_envs",
     "comparable", "procedural_dataset", "fresh_evaluation",
     "add_config_options", "config_from_args", "flag_of",
@@ -53,15 +53,17 @@ PRESETS = ("cpu", "paper", "general")
 PROTOCOLS = ("paper", "standard")
 #: Encoder architectures: ``mlp`` (vector states), ``cnn`` (compact, CPU default for images),
 #: ``resnet18`` (the paper's image network), ``cellnet`` (mazes: per-cell features, a
-#: recurrent convolution over the cell grid and a global read-out; the ``general`` preset's);
-#: the ones that fit each env kind's observations.
-ARCHS = ("mlp", "cnn", "resnet18", "cellnet")
+#: recurrent convolution over the cell grid and a global read-out), ``cellplan`` (the same
+#: with a value-iteration planner in the policy; the ``general`` preset's).
+ARCHS = ("mlp", "cnn", "resnet18", "cellnet", "cellplan")
+#: The maze networks that read the frame cell by cell (:mod:`abco_train.cellnets`).
+CELL_ARCHS = ("cellnet", "cellplan")
 DEVICES = ("auto", "cpu", "cuda")
 #: How the IDM reads a transition (:class:`abco_train.nets.IDMNet`).
 IDM_INPUTS = ("difference", "pair")
 #: ``default``: abco's data and schedule; ``authors``: the authors' (see REGIME_DEFAULTS).
 REGIMES = ("default", "authors")
-ARCHS_BY_KIND = {"maze": ("cnn", "resnet18", "cellnet"), "classic": ("mlp",)}
+ARCHS_BY_KIND = {"maze": ("cnn", "resnet18", *CELL_ARCHS), "classic": ("mlp",)}
 #: Training-time data augmentation: ``none``, or ``transpose`` (mazes: each minibatch
 #: example is transposed about the main diagonal with probability 1/2, actions mapped
 #: N<->W, S<->E; start and goal stay where they are).
@@ -143,7 +145,7 @@ class RunConfig:
                        "pre-demonstrations without wall hits, one IDM and one policy epoch per "
                        "iteration, alpha 10)", "default", choices=REGIMES)
     iterations: int | None = _opt("alpha: iterations 0..alpha run (iterative methods)", min=0)
-    arch: str | None = _opt("network: mlp (vectors), cnn, resnet18 or cellnet (images)",
+    arch: str | None = _opt("network: mlp (vectors), cnn, resnet18, cellnet or cellplan (images)",
                             choices=ARCHS)  # fmt: skip
     attention: bool | None = _opt("self-attention in both networks (default: the method's)")
     idm_input: str | None = _opt("how the IDM reads (s, s'): difference (one encoder over s and "
@@ -158,6 +160,9 @@ class RunConfig:
     min_updates: int | None = _opt("raise --policy-epochs and --idm-epochs on small data until "
                                    "each makes at least this many minibatch updates (default: "
                                    "1000 for the general preset, else none)", min=1)
+    max_updates: int | None = _opt("cut each policy unit (--policy-epochs) on large data to at "
+                                   "most this many minibatch updates (default: 1000 for the "
+                                   "general preset, else none)", min=1)
     first_epochs_factor: int | None = _opt("iteration 0 trains both nets this many times longer",
                                            min=1)  # fmt: skip
     batch_size: int | None = _opt("minibatch size", min=1)
@@ -240,10 +245,13 @@ class RunConfig:
         if self.arch is not None and self.arch in ARCHS and self.arch not in ARCHS_BY_KIND[kind]:
             raise ConfigError(f"--arch {self.arch} does not fit {self.env}'s observations; use "
                               f"{' or '.join(ARCHS_BY_KIND[kind])}")  # fmt: skip
-        if self.arch == "cellnet" and self.idm_input == "pair":
-            raise ConfigError("--arch cellnet reads a transition as one frame and its difference"
-                              " (--idm-input difference): its pooled features of one frame do"
-                              " not say where the agent is")  # fmt: skip
+        if self.arch in CELL_ARCHS and self.idm_input == "pair":
+            raise ConfigError(f"--arch {self.arch} reads a transition as one frame and its "
+                              "difference (--idm-input difference): its pooled features of one "
+                              "frame do not say where the agent is")  # fmt: skip
+        if self.min_updates and self.max_updates and self.min_updates > self.max_updates:
+            raise ConfigError(f"--min-updates {self.min_updates} is above --max-updates "
+                              f"{self.max_updates}: a policy unit cannot make both")  # fmt: skip
         if kind == "classic" and self.augment not in (None, "none"):
             raise ConfigError(f"--augment {self.augment} is for maze frames; classic control "
                               "takes --augment none")  # fmt: skip
@@ -301,15 +309,16 @@ DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
         "idm_epochs": 4, "idm_patience": 1, "policy_epochs": 3, "first_epochs_factor": 3,
         "batch_size": 32, "lr": 1e-4, "idm_samples": 20_000,
     },
-    # Unseen layouts: per-cell features and a recurrent convolution over the cell grid (no
-    # weight tied to a position), transposed mazes for twice the data, and at least 1,000
-    # minibatches per epoch setting, for the 850 expert transitions of 100 layouts as for
-    # the 84,000 of 10,000 (docs/training.md).
+    # Unseen layouts: per-cell features, a recurrent convolution and value iteration over the
+    # cell grid (no weight tied to a position), transposed mazes for twice the data, and
+    # exactly 1,000 policy updates per epoch setting (at least 1,000 IDM updates), for the 850
+    # expert transitions of 100 layouts as for the 84,000 of 10,000: every K gets the same
+    # compute, so a curve over K measures data (docs/training.md).
     ("maze", "general"): {
-        "iterations": 2, "arch": "cellnet", "attention": True, "idm_input": "difference",
+        "iterations": 2, "attention": True, "idm_input": "difference",
         "idm_epochs": 4, "idm_patience": 1, "policy_epochs": 3, "first_epochs_factor": 3,
         "batch_size": 64, "lr": 1e-3, "idm_samples": 20_000, "augment": "transpose",
-        "min_updates": 1_000,
+        "min_updates": 1_000, "max_updates": 1_000, "arch": "cellplan",
     },
     ("classic", "cpu"): {
         "iterations": 2, "arch": "mlp", "attention": True, "idm_input": "difference",

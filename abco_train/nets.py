@@ -1,5 +1,6 @@
 """Networks of ABCO: SAGAN self-attention, the paper's vector nets, its ResNet-18, a compact
-CNN, and a network for unseen maze layouts (:class:`CellNet`).
+CNN, and :func:`build_networks`, which also builds the networks for unseen maze layouts
+(:mod:`abco_train.cellnets`).
 
 Every network comes in two roles built from the same encoder:
 
@@ -21,11 +22,10 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from gymnasium import spaces
 from torch import nn
 
-from abco_train.config import ARCHS, IDM_INPUTS
+from abco_train.config import ARCHS, CELL_ARCHS, IDM_INPUTS
 
 __all__ = [
     "ARCHS",
@@ -35,8 +35,6 @@ __all__ = [
     "FeatureSelfAttention",
     "VectorEncoder",
     "CompactCNN",
-    "CellNet",
-    "CellReadout",
     "ResNet18",
     "PolicyNet",
     "IDMNet",
@@ -179,113 +177,6 @@ class CompactCNN(nn.Module):
         return self.body(image_input(x))
 
 
-def cell_centres(grid: int, height: int, width: int) -> torch.Tensor:
-    """``(1, grid, grid, 2)`` centres of a maze's cells as ``grid_sample`` coordinates.
-
-    Cell borders fall where the renderer draws them (``round(k * height / grid)``,
-    :class:`abco_envs.maze.render.MazeRenderer`); ``x`` and ``y`` are in ``[-1, 1]`` over the
-    image's extent (``align_corners=False``), so they address any feature map that covers
-    the whole image.
-    """
-    rows = np.round(np.linspace(0, height, grid + 1))
-    cols = np.round(np.linspace(0, width, grid + 1))
-    y = (rows[:-1] + rows[1:]) / height - 1.0  # the middle of each band of rows, normalised
-    x = (cols[:-1] + cols[1:]) / width - 1.0
-    yy, xx = np.meshgrid(y, x, indexing="ij")
-    return torch.as_tensor(np.stack([xx, yy], axis=-1)[None], dtype=torch.float32)
-
-
-class CellReadout(nn.Module):
-    """Global read-out of a cell feature map: attention pooling and max pooling.
-
-    A 1x1 projection of the input cell features ``x`` (where the agent's dot is, once
-    learned) gives one logit per cell; the softmax over cells weights the reasoned features
-    ``h``: ``sum_i softmax(w . x_i) h_i``, concatenated with ``max_i h_i``. Both are sums or
-    maxima over cells, so the output does not depend on where a pattern lies, only on the
-    features: permuting the cells of ``x`` and ``h`` alike leaves it unchanged.
-    """
-
-    def __init__(self, in_channels: int, channels: int) -> None:
-        super().__init__()
-        self.where = nn.Conv2d(in_channels, 1, 1)
-        self.out_features = 2 * channels
-
-    def forward(self, x: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
-        """``(B, 2C)`` features of ``h`` ``(B, C, n, n)`` read where ``x`` points."""
-        weights = torch.softmax(self.where(x).flatten(1), dim=1)  # (B, n*n)
-        cells = h.flatten(2)  # (B, C, n*n)
-        at_agent = torch.bmm(cells, weights.unsqueeze(-1)).squeeze(-1)
-        return torch.cat([at_agent, cells.amax(dim=2)], dim=1)
-
-
-class CellNet(nn.Module):
-    """A maze network that reasons over the whole maze, cell by cell, with no weight tied to a
-    position (the ``general`` preset's ``cellnet``).
-
-    1. A convolutional stem over the frame, ``conv 4x4/4 (C/2) -> conv 3x3 (C) -> conv 3x3
-       (C)`` (receptive field 20 pixels: a 5x5 cell is 12.8 pixels wide on 64x64 frames), read
-       at each maze cell's centre (bilinear ``grid_sample``): an ``(n, n)`` grid of cell
-       features, each seeing its cell's walls, colour and dot.
-    2. SAGAN self-attention over the ``n * n`` cells (as the paper places it after the second
-       stage).
-    3. ``iterations`` steps of one weight-shared residual block over the cell grid, each step
-       re-reading the cell features (``h <- h + conv(lrelu(conv([h, x])))``, two 3x3
-       convolutions: information moves up to two cells a step), so shortest-path-like
-       reasoning can travel from the goal to the agent; the default, ``2 * n`` steps, covers
-       paths of ``4n`` cells (the longest distance to the goal in 1,000 procedural layouts:
-       18 cells on 5x5, 44 on 10x10; 99% of them within 16 and 33).
-    4. Self-attention again, then :class:`CellReadout` (attention pooling at the agent, max
-       pooling), ``2C`` features: no flattened, position-tied layer.
-
-    The parameters do not depend on the maze size: the same weights run on any ``n``.
-
-    Args:
-        image_shape: ``(H, W, C)`` of the frames (or of frame + difference channels).
-        grid: Cells per side of the maze.
-        attention: Include the two self-attention modules.
-        channels: ``C``.
-        iterations: Recurrent steps (default ``2 * grid``).
-    """
-
-    def __init__(self, image_shape: tuple[int, int, int], grid: int, attention: bool = True,
-                 channels: int = 32, iterations: int | None = None) -> None:  # fmt: skip
-        super().__init__()
-        h, w, c = image_shape
-        self.grid = int(grid)
-        self.iterations = 2 * self.grid if iterations is None else int(iterations)
-        half = channels // 2
-        self.stem = nn.Sequential(
-            nn.Conv2d(c, half, 4, stride=4), nn.LeakyReLU(),
-            nn.Conv2d(half, channels, 3, padding=1), nn.LeakyReLU(),
-            nn.Conv2d(channels, channels, 3, padding=1), nn.LeakyReLU(),
-        )  # fmt: skip
-        self.register_buffer("centres", cell_centres(self.grid, h, w), persistent=False)
-        self.attend_in = SelfAttention2d(channels) if attention else nn.Identity()
-        self.step1 = nn.Conv2d(2 * channels, channels, 3, padding=1)
-        self.step2 = nn.Conv2d(channels, channels, 3, padding=1)
-        self.attend_out = SelfAttention2d(channels) if attention else nn.Identity()
-        self.readout = CellReadout(channels, channels)
-        self.out_features = self.readout.out_features
-
-    def cells(self, x: torch.Tensor) -> torch.Tensor:
-        """``(B, C, n, n)`` cell features of ``(B, H, W, C)`` images."""
-        features = self.stem(image_input(x))
-        grid = self.centres.expand(features.shape[0], -1, -1, -1)
-        return F.grid_sample(features, grid, mode="bilinear", align_corners=False)
-
-    def reason(self, x: torch.Tensor) -> torch.Tensor:
-        """The recurrent steps over the cell grid, from ``h = x``."""
-        h = x
-        for _ in range(self.iterations):
-            h = h + self.step2(F.leaky_relu(self.step1(torch.cat([h, x], dim=1))))
-        return h
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Pooled features of a batch of ``(H, W, C)`` images."""
-        cells = self.attend_in(self.cells(x))
-        return self.readout(cells, self.attend_out(self.reason(cells)))
-
-
 class BasicBlock(nn.Module):
     """ResNet basic block: two 3x3 conv + batch norm, identity or 1x1 projection shortcut."""
 
@@ -338,10 +229,6 @@ class ResNet18(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """512 pooled features of a batch of ``(H, W, C)`` images."""
         return self.blocks(self.stem(image_input(x))).mean(dim=(2, 3))
-
-
-#: Recurrent steps of the ``cellnet`` IDM (the policy's: ``2 * n``).
-CELLNET_IDM_ITERATIONS = 2
 
 
 def _head(in_features: int, hidden: int | None, n_actions: int, dropout: float) -> nn.Module:
@@ -467,11 +354,15 @@ def build_networks(
         raise ValueError(f"unknown idm_input {idm_input!r}; expected one of {IDM_INPUTS}")
     fused = idm_input == "difference"
     idm_shape = (*shape[:2], 2 * shape[2]) if fused else shape  # frame + difference channels
-    if arch == "cellnet":
+    if arch in CELL_ARCHS:
+        # cellnets builds on this module's layers: imported here, not at the top (a cycle).
+        from abco_train.cellnets import CELLNET_IDM_ITERATIONS, CellNet, PlannedHead
+
         if grid is None or not fused:
-            raise ValueError("arch 'cellnet' needs the maze's grid size and idm_input "
+            raise ValueError(f"arch {arch!r} needs the maze's grid size and idm_input "
                              "'difference'")  # fmt: skip
-        pm_enc = CellNet(shape, grid, attention)
+        plan = arch == "cellplan"
+        pm_enc = CellNet(shape, grid, attention, plan=plan)
         # The IDM's move is local (two neighbouring cells): two steps see both cells.
         idm_enc = CellNet(idm_shape, grid, attention, iterations=CELLNET_IDM_ITERATIONS)
 
@@ -479,7 +370,8 @@ def build_networks(
             return nn.Sequential(nn.Linear(features, 128), nn.LeakyReLU(),
                                  nn.Linear(128, n_actions))  # fmt: skip
 
-        return (PolicyNet(pm_enc, head(pm_enc.out_features)),
+        pm_head = PlannedHead(pm_enc.out_features, n_actions) if plan else head(pm_enc.out_features)
+        return (PolicyNet(pm_enc, pm_head),
                 IDMNet(idm_enc, head(idm_enc.out_features), concat_inputs=True))  # fmt: skip
     encoder = {"cnn": CompactCNN, "resnet18": ResNet18}.get(arch)
     if encoder is None:

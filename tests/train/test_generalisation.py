@@ -25,11 +25,11 @@ from abco_envs.maze.render import MazeRenderer
 from abco_envs.maze.rules import OPEN_E, OPEN_N, OPEN_S, OPEN_W
 from abco_train import config as config_module
 from abco_train import grid as bench
-from abco_train.abco import TRANSPOSED_ACTIONS, transpose_batch
+from abco_train.abco import TRANSPOSED_ACTIONS, _fit, transpose_batch
+from abco_train.cellnets import CellReadout, cell_centres
 from abco_train.cli import main as abco_main
 from abco_train.config import ConfigError, RunConfig
 from abco_train.data import TRAIN_EVAL_LAYOUTS, load_training_data
-from abco_train.nets import CellReadout, build_networks, cell_centres
 from abco_train.policy import load_policy
 from abco_train.report import write_report
 from abco_train.report_grid import load_runs
@@ -84,11 +84,11 @@ def test_layouts_selects_the_procedural_datasets() -> None:
 
 def test_the_general_preset() -> None:
     cfg = RunConfig(env=ENV, preset="general").resolved()
-    assert (cfg.arch, cfg.augment, cfg.idm_input, cfg.attention, cfg.min_updates) == \
-        ("cellnet", "transpose", "difference", True, 1000)
+    assert (cfg.arch, cfg.augment, cfg.idm_input, cfg.attention, cfg.min_updates,
+            cfg.max_updates) == ("cellplan", "transpose", "difference", True, 1000, 1000)
     for preset in ("cpu", "paper"):  # the existing presets' defaults do not change
         old = RunConfig(env=ENV, preset=preset).resolved()
-        assert old.augment is None and old.min_updates is None
+        assert old.augment is None and old.min_updates is None and old.max_updates is None
         assert old.arch in ("cnn", "resnet18")
 
 
@@ -104,6 +104,7 @@ def test_the_general_preset() -> None:
     ({"env": "CartPole-v1", "eval_fresh": True}, "--eval-fresh is for mazes"),
     ({"env": "CartPole-v1", "arch": "cellnet"}, "--arch cellnet does not fit"),
     ({"augment": "flip"}, "--augment must be one of none, transpose"),
+    ({"min_updates": 20, "max_updates": 10}, "--min-updates 20 is above --max-updates 10"),
 ])  # fmt: skip
 def test_bad_settings_are_named(changes: dict[str, Any], message: str) -> None:
     with pytest.raises(ConfigError, match=message):
@@ -208,30 +209,6 @@ def test_eval_fresh_leaves_the_other_numbers_alone(tiny_data, tmp_path) -> None:
 # -- the general preset: the network and transposed mazes -------------------------------------
 
 
-@pytest.mark.parametrize("grid", [5, 10])
-def test_cellnet_runs_on_both_tasks(grid: int) -> None:
-    policy, idm = build_networks(FRAMES, 4, "cellnet", True, "difference", grid=grid)
-    obs = torch.randint(0, 256, (3, 64, 64, 3), dtype=torch.uint8)
-    assert policy(obs).shape == (3, 4) and idm(obs, obs).shape == (3, 4)
-    assert policy.encoder.iterations == 2 * grid and idm.encoder.iterations == 2
-    # the head reads 2C pooled features, whatever the grid: no flattened, position-tied layer
-    assert policy.head[0].in_features == policy.encoder.out_features == 64
-    with pytest.raises(ValueError, match="needs the maze's grid size"):
-        build_networks(FRAMES, 4, "cellnet", True, "difference")
-
-
-def test_cellnet_weights_do_not_depend_on_the_maze_size() -> None:
-    """No weight is tied to a position: a 5x5 network's weights run a 10x10 maze as they are."""
-    small, _ = build_networks(FRAMES, 4, "cellnet", True, "difference", grid=5)
-    large, _ = build_networks(FRAMES, 4, "cellnet", True, "difference", grid=10)
-    shapes = {k: v.shape for k, v in small.state_dict().items()}
-    assert shapes == {k: v.shape for k, v in large.state_dict().items()}
-    large.load_state_dict(small.state_dict())
-    env = gym.make("AbcoMaze10x10-v0")
-    obs, _ = env.reset(seed=0)
-    assert large(torch.from_numpy(obs[None])).shape == (1, 4)
-
-
 def test_readout_does_not_depend_on_where_features_lie() -> None:
     torch.manual_seed(0)
     readout = CellReadout(8, 6)
@@ -304,12 +281,32 @@ def test_min_updates_raises_epochs_on_small_data(procedural, tmp_path) -> None:
     assert record["train"]["policy_epochs"] == 10 * (1 + 1)  # first_epochs_factor + alpha
 
 
+def test_max_updates_cuts_policy_units_on_large_data(procedural, tmp_path) -> None:
+    """Batches of 4: an epoch of the 5 layouts' expert pairs is many updates; a unit is cut to
+    3, BC's budget is two units (first_epochs_factor + alpha), so 6 updates in one epoch."""
+    train(_config(procedural, tmp_path / "run", batch_size=4, policy_epochs=2, max_updates=3))
+    record = json.loads((tmp_path / "run" / "metrics.jsonl").read_text().splitlines()[0])
+    assert (record["train"]["policy_updates"], record["train"]["policy_epochs"]) == (6, 1)
+
+
+def test_fit_stops_after_max_batches() -> None:
+    net = torch.nn.Linear(3, 2)
+    steps = []
+    opt = torch.optim.SGD(net.parameters(), lr=0.1)
+    opt.register_step_post_hook(lambda *_: steps.append(1))
+    x, y = torch.randn(10, 3), torch.randint(0, 2, (10,))
+    _fit(net, opt, lambda idx: (x[idx],), y, 3, 4, np.random.default_rng(0), max_batches=5)
+    assert len(steps) == 5  # 3 epochs of 3 batches would be 9
+    _fit(net, opt, lambda idx: (x[idx],), y, 2, 4, np.random.default_rng(0))
+    assert len(steps) == 5 + 6
+
+
 def test_general_preset_trains_both_networks(procedural, tmp_path) -> None:
     final = train(_config(procedural, tmp_path / "run", method="abco", preset="general",
                           min_updates=1))  # fmt: skip
     assert final["status"] == "ok" and "fresh/paper" in final
     config = json.loads((tmp_path / "run" / "config.json").read_text())
-    assert (config["arch"], config["augment"], config["layouts"]) == ("cellnet", "transpose", 5)
+    assert (config["arch"], config["augment"], config["layouts"]) == ("cellplan", "transpose", 5)
 
 
 # -- the grid and the report ---------------------------------------------------------------------
