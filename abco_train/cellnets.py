@@ -13,7 +13,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from abco_envs.maze.rules import DELTAS
-from abco_train.nets import SelfAttention2d, image_input
+from abco_train.layers import SelfAttention2d, image_input
 
 #: The floor of the planner's action values before the log (a walled-off move).
 LOG_FLOOR = 1e-6

@@ -25,7 +25,9 @@ import torch
 from gymnasium import spaces
 from torch import nn
 
+from abco_train.cellnets import CELLNET_IDM_ITERATIONS, CellNet, PlannedHead
 from abco_train.config import ARCHS, CELL_ARCHS, IDM_INPUTS
+from abco_train.layers import SelfAttention2d, image_input
 
 __all__ = [
     "ARCHS",
@@ -41,46 +43,6 @@ __all__ = [
     "build_networks",
 ]
 
-
-
-class SelfAttention2d(nn.Module):
-    """SAGAN self-attention over the ``N = H * W`` positions of a feature map.
-
-    ``f = W_f x`` (key), ``g = W_g x`` (query), ``h = W_h x`` (value) are 1x1 convolutions to
-    ``C / k`` channels; ``beta_{j,i} = softmax_i(f(x_i)^T g(x_j))``;
-    ``a_j = W_v sum_i beta_{j,i} h(x_i)`` (a 1x1 convolution back to ``C`` channels); the
-    output is ``x + mu * a`` with ``mu`` a learnable scalar initialised at 0, so the module is
-    the identity at initialisation (Eqs. 7-8 of the paper).
-
-    Args:
-        channels: ``C``.
-        reduction: ``k``; the key/query/value width is ``max(1, C // k)``.
-    """
-
-    def __init__(self, channels: int, reduction: int = 8) -> None:
-        super().__init__()
-        inner = max(1, channels // reduction)
-        # 1x1 convolutions are per-position linear maps; nn.Linear on the (B, N, C) tokens
-        # computes exactly that and avoids oneDNN's slow path for tiny 1x1 convs on CPU.
-        self.key = nn.Linear(channels, inner)
-        self.query = nn.Linear(channels, inner)
-        self.value = nn.Linear(channels, inner)
-        self.out = nn.Linear(inner, channels)
-        self.mu = nn.Parameter(torch.zeros(()))
-
-    def attend(self, x: torch.Tensor) -> torch.Tensor:
-        """The attention feature map ``a`` (before weighting by ``mu``), same shape as ``x``."""
-        b, c, h, w = x.shape
-        tokens = x.flatten(2).transpose(1, 2)  # (B, N, C): one token per position
-        key, query, value = self.key(tokens), self.query(tokens), self.value(tokens)
-        scores = torch.bmm(query, key.transpose(1, 2))  # s[j, i] = g(x_j) . f(x_i)
-        beta = torch.softmax(scores, dim=-1)  # over the attended positions i
-        mixed = torch.bmm(beta, value)  # (B, N, C'): sum_i beta_ji h(x_i)
-        return self.out(mixed).transpose(1, 2).reshape(b, c, h, w)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """``x + mu * a(x)``."""
-        return x + self.mu * self.attend(x)
 
 
 class FeatureSelfAttention(nn.Module):
@@ -141,13 +103,6 @@ class VectorEncoder(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Features of standardised ``x``."""
         return self.body((x.float() - self.mean) / self.std)
-
-
-def image_input(x: torch.Tensor) -> torch.Tensor:
-    """``(B, H, W, C)`` images (uint8, or float in ``[-1, 1]``) -> ``(B, C, H, W)`` float."""
-    if x.dtype == torch.uint8:
-        x = x.float().div_(255.0)
-    return x.permute(0, 3, 1, 2)
 
 
 class CompactCNN(nn.Module):
@@ -355,9 +310,6 @@ def build_networks(
     fused = idm_input == "difference"
     idm_shape = (*shape[:2], 2 * shape[2]) if fused else shape  # frame + difference channels
     if arch in CELL_ARCHS:
-        # cellnets builds on this module's layers: imported here, not at the top (a cycle).
-        from abco_train.cellnets import CELLNET_IDM_ITERATIONS, CellNet, PlannedHead
-
         if grid is None or not fused:
             raise ValueError(f"arch {arch!r} needs the maze's grid size and idm_input "
                              "'difference'")  # fmt: skip
