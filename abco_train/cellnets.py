@@ -1,5 +1,5 @@
-"""The maze networks for unseen layouts: :class:`CellNet` (the ``general`` preset's
-``cellnet``) and its value-iteration planner (``cellplan``, :class:`ValuePlanner`).
+"""The maze networks for unseen layouts: :class:`CellNet` (``--arch cellnet``) and, with its
+value-iteration planner (:class:`ValuePlanner`), ``cellplan``, the ``general`` preset's.
 
 Both read a rendered maze cell by cell and tie no weight to a position, so the same weights
 run on any layout and any maze size.
@@ -124,7 +124,7 @@ class ValuePlanner(nn.Module):
 
 class CellNet(nn.Module):
     """A maze network that reasons over the whole maze, cell by cell, with no weight tied to a
-    position (the ``general`` preset's ``cellnet``).
+    position (``cellnet``; with ``plan``, ``cellplan``, the ``general`` preset's policy).
 
     1. A convolutional stem over the frame, ``conv 4x4/4 (C/2) -> conv 3x3 (C) -> conv 3x3
        (C)`` (receptive field 20 pixels: a 5x5 cell is 12.8 pixels wide on 64x64 frames), read
