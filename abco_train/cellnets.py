@@ -62,9 +62,12 @@ class CellReadout(nn.Module):
         """``(B, C)``: the ``(B, C, n, n)`` maps averaged with ``weights``."""
         return torch.bmm(maps.flatten(2), weights.unsqueeze(-1)).squeeze(-1)
 
-    def forward(self, x: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
-        """``(B, 2C)`` features of ``h`` ``(B, C, n, n)`` read where ``x`` points."""
-        return torch.cat([self.at(h, self.weights(x)), h.flatten(2).amax(dim=2)], dim=1)
+    def forward(self, x: torch.Tensor, h: torch.Tensor,
+                weights: torch.Tensor | None = None) -> torch.Tensor:  # fmt: skip
+        """``(B, 2C)`` features of ``h`` ``(B, C, n, n)`` read where ``x`` points
+        (``weights``: :meth:`weights` of ``x``, when the caller has them already)."""
+        weights = self.weights(x) if weights is None else weights
+        return torch.cat([self.at(h, weights), h.flatten(2).amax(dim=2)], dim=1)
 
 
 class ValuePlanner(nn.Module):
@@ -193,23 +196,23 @@ class CellNet(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Pooled features of a batch of ``(H, W, C)`` images."""
         cells = self.attend_in(self.cells(x))
-        features = self.readout(cells, self.attend_out(self.reason(cells)))
+        weights = self.readout.weights(cells)  # where the agent is: read once, used twice
+        features = self.readout(cells, self.attend_out(self.reason(cells)), weights)
         if self.planner is None:
             return features
-        values = self.readout.at(self.planner(cells), self.readout.weights(cells))
-        return torch.cat([features, values], dim=1)
+        return torch.cat([features, self.readout.at(self.planner(cells), weights)], dim=1)
 
 
 class PlannedHead(nn.Module):
-    """The action layer of a ``cellplan`` policy: ``FC 128 -> actions`` over all features,
-    plus ``scale * log Q_a`` of the planner's last ``n_actions`` features (``scale`` learned,
-    starting at ``1 / -log gamma``: one logit per move of path length)."""
+    """The action layer of a ``cellplan`` policy: ``mlp`` (the cell networks' ``FC 128 ->
+    actions``) over all features, plus ``scale * log Q_a`` of the planner's last ``n_actions``
+    features (``scale`` learned, starting at ``1 / -log gamma``, the planner's ``gamma``: one
+    logit per move of path length)."""
 
-    def __init__(self, in_features: int, n_actions: int, gamma: float = 0.9) -> None:
+    def __init__(self, mlp: nn.Module, n_actions: int, gamma: float) -> None:
         super().__init__()
         self.n_actions = n_actions
-        self.mlp = nn.Sequential(nn.Linear(in_features, 128), nn.LeakyReLU(),
-                                 nn.Linear(128, n_actions))  # fmt: skip
+        self.mlp = mlp
         self.scale = nn.Parameter(torch.tensor(-1.0 / float(np.log(gamma))))
 
     def forward(self, features: torch.Tensor) -> torch.Tensor:

@@ -322,7 +322,9 @@ def build_networks(
             return nn.Sequential(nn.Linear(features, 128), nn.LeakyReLU(),
                                  nn.Linear(128, n_actions))  # fmt: skip
 
-        pm_head = PlannedHead(pm_enc.out_features, n_actions) if plan else head(pm_enc.out_features)
+        pm_head = head(pm_enc.out_features)
+        if pm_enc.planner is not None:
+            pm_head = PlannedHead(pm_head, n_actions, pm_enc.planner.gamma)
         return (PolicyNet(pm_enc, pm_head),
                 IDMNet(idm_enc, head(idm_enc.out_features), concat_inputs=True))  # fmt: skip
     encoder = {"cnn": CompactCNN, "resnet18": ResNet18}.get(arch)

@@ -66,7 +66,7 @@ def test_too_few_steps_leave_far_cells_unvalued() -> None:
 
 
 def test_planned_head_adds_scaled_log_values() -> None:
-    head = PlannedHead(6, 4, gamma=0.9)
+    head = PlannedHead(torch.nn.Linear(6, 4), 4, gamma=0.9)
     assert head.scale.item() == pytest.approx(1 / -np.log(0.9))
     features = torch.randn(2, 6)
     expected = head.mlp(features) + head.scale * features[:, -4:]
