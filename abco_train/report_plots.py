@@ -148,10 +148,15 @@ def plot_generalisation(cells: Mapping[tuple[str, str, int | None], Sequence[Any
         return None
     plt = pyplot()
     fig, axes = plt.subplots(len(envs), 2, figsize=(10, 3.4 * len(envs)), squeeze=False)
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    palette = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    # one colour and one x range per method and K across all rows, so that rows compare
+    every = list(dict.fromkeys(m for _, m, k in cells if k is not None))
+    colour = {m: palette[i % len(palette)] for i, m in enumerate(every)}
+    all_ks = [k for _, _, k in cells if k is not None]
     for row, env in zip(axes, envs):
-        methods = list(dict.fromkeys(m for e, m, k in cells if e == env and k is not None))
-        for i, method in enumerate(methods):
+        methods = [m for m in every if any(e == env and mm == m and k is not None
+                                           for e, mm, k in cells)]
+        for method in methods:
             ks = sorted(k for e, m, k in cells if e == env and m == method and k is not None)
             for split, style in (("test", "-"), ("fresh", "--")):
                 for ax, metric in zip(row, ("success_rate", "performance")):
@@ -168,10 +173,11 @@ def plot_generalisation(cells: Mapping[tuple[str, str, int | None], Sequence[Any
                         hi.append(s.ci[1] - s.mean)
                     if xs:
                         ax.errorbar(xs, ys, yerr=[lo, hi], ls=style, marker="o", ms=4,
-                                    capsize=3, color=colours[i % len(colours)],
+                                    capsize=3, color=colour[method],
                                     label=f"{labels.get(method, method)}, {split}")
         for ax, title in zip(row, ("held-out success rate", "held-out P")):
             ax.set_xscale("log")
+            ax.set_xlim(min(all_ks) / 1.6, max(all_ks) * 1.6)
             ax.set_xlabel("training layouts K (first K procedural layouts)")
             ax.set_title(f"{env}: {title} (paper protocol)", fontsize=9)
             ax.grid(alpha=0.3, which="both")

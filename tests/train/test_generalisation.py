@@ -406,3 +406,31 @@ def test_success_rate_is_one_number_per_run(tmp_path) -> None:
     run = load_runs(tmp_path)[0]
     assert run.values("test/paper", "success_rate").tolist() == [0.25]
     assert len(run.values("test/paper", "performance")) == 2
+
+
+def test_generalisation_plot_keeps_one_colour_per_method_across_envs(tmp_path, monkeypatch) -> None:
+    """A maze that has only some methods' runs draws them in the colours of the other rows."""
+    import matplotlib.pyplot as plt
+
+    from abco_train.report_plots import plot_generalisation
+
+    class Runs:
+        def __init__(self, success: float) -> None:
+            self.success = success
+
+        def values(self, evaluation: str, metric: str) -> list[float]:
+            return [self.success, self.success]
+
+    cells = {(ENV, "bc", 100): [Runs(0.5)], (ENV, "abco", 100): [Runs(0.6)],
+             ("AbcoMaze10x10-v0", "abco", 10_000): [Runs(0.7)]}  # fmt: skip
+    figures = []
+    monkeypatch.setattr(plt, "close", figures.append)  # keep the figure to look at it
+    assert plot_generalisation(cells, tmp_path / "g.png") is not None
+    colours: dict[str, set[str]] = {}
+    for ax in figures[0].axes:
+        for bars in ax.containers:
+            method = bars.get_label().split(",")[0]
+            colours.setdefault(method, set()).add(bars.lines[0].get_color())
+        assert ax.get_xlim()[0] < 100 and ax.get_xlim()[1] > 10_000  # one x range for all rows
+    assert set(colours) == {"bc", "abco"}
+    assert all(len(c) == 1 for c in colours.values()) and colours["bc"] != colours["abco"]
