@@ -69,6 +69,17 @@ What ``G`` predicts, and with what:
   minute on one CPU thread. Why convolutional: with one set of filters at every position a
   latent action means the same move wherever the agent is; an MLP head over flat features
   (tried first) let latent 0 mean "down" in one cell and "right" in another.
+* **Cells** (``target="cells"``, the 10x10 maze's default): a 10x10 maze's cells are 6 or 7
+  pixels wide, so a fixed pooling cuts each at another offset and one move's pooled
+  difference looks different in every cell. This target is how much each cell changed, the
+  sum of ``|s' - s|`` over the cell's pixels and the channels (:class:`CellAverage`, at the
+  renderer's cell borders), one value per cell: a move is the same two cells' change
+  wherever it is made, whatever the cells' sizes (and the goal's colour changes only how
+  much). ``G`` is then local: ``E`` is a 3x3 convolution at full resolution averaged over
+  each cell and a 1x1 convolution, and the head one 3x3 convolution over cells, so a cell's
+  prediction sees its neighbours only. A global ``G`` can learn where the deterministic
+  expert goes next from the whole maze, and its latents need not stand for moves; a local
+  one cannot, so they must (docs/training.md).
 
 Identifiability (why the remapping reads ``s``): a deterministic expert shows one action per
 state, so the min-over-latents loss cannot tell "latent 0 = left here, latent 0 = right
@@ -107,13 +118,14 @@ actions are a measurement only, never used for training or for a choice.
 Options (``--method-options``; defaults in :data:`OPTION_DEFAULTS` by env kind, then
 :data:`ENV_OPTION_DEFAULTS` by env, checked by :meth:`ILPO.options`): ``latents`` (``k``,
 default the env's number of actions), ``train_steps``, ``policy_steps``, ``later_steps``,
-``hidden``, ``channels``, ``pool``, ``exp_weight``, ``relax``, ``latent_init``,
+``hidden``, ``channels``, ``pool``, ``target``, ``exp_weight``, ``relax``, ``latent_init``,
 ``split_noise``, ``remap``, ``remap_input``, ``remap_steps``, ``remap_envs``,
 ``remap_epsilon``, ``remap_margin``, ``remap_epochs``, ``remap_max_steps``. All randomness
 comes from the run's generator and from torch (seeded by the harness): the same seed gives the
 same run on CPU.
 
-It is registered through :func:`abco_train.methods.register` like any plugin.
+It is registered through :func:`abco_train.methods.register` like any plugin. The losses and
+networks are in :mod:`abco_train.ilpo_nets` (imported here under the same names).
 """
 
 from __future__ import annotations
@@ -131,11 +143,21 @@ import abco_envs
 from abco_train.config import ConfigError, RunConfig
 from abco_train.data import TrainingData
 from abco_train.evaluate import make_vector_env
+from abco_train.ilpo_nets import (
+    CellAverage,
+    ILPONet,
+    ImageForwardModel,
+    RemapNet,
+    VectorForwardModel,
+    expected_prediction_loss,
+    latent_errors,
+    latent_policy,
+    min_over_latents_loss,
+)
 from abco_train.methods import Method, register
-from abco_train.nets import CompactCNN, image_input
 
-__all__ = ["ILPO", "ILPONet", "VectorForwardModel", "ImageForwardModel", "latent_policy",
-           "min_over_latents_loss", "expected_prediction_loss", "latent_errors",
+__all__ = ["ILPO", "CellAverage", "ILPONet", "VectorForwardModel", "ImageForwardModel",
+           "latent_policy", "min_over_latents_loss", "expected_prediction_loss", "latent_errors",
            "OPTION_DEFAULTS", "ENV_OPTION_DEFAULTS"]  # fmt: skip
 
 #: ILPO's options by env kind (``None``: decided from the env, see :meth:`ILPO.options`).
@@ -149,7 +171,8 @@ __all__ = ["ILPO", "ILPONet", "VectorForwardModel", "ImageForwardModel", "latent
 OPTION_DEFAULTS: dict[str, dict[str, Any]] = {
     "classic": {
         "latents": None, "train_steps": 3000, "policy_steps": None, "later_steps": 0,
-        "hidden": 64, "channels": 16, "pool": 1, "exp_weight": 0.0, "relax": 0.0,
+        "hidden": 64, "channels": 16, "pool": 1, "target": "pooled", "exp_weight": 0.0,
+        "relax": 0.0,
         "latent_init": "random", "split_noise": 0.01, "remap": "state",
         "remap_input": "effect+embedding",
         "remap_steps": 500, "remap_envs": 10, "remap_epsilon": 0.2, "remap_margin": 0.1,
@@ -157,7 +180,8 @@ OPTION_DEFAULTS: dict[str, dict[str, Any]] = {
     },
     "maze": {
         "latents": None, "train_steps": 1300, "policy_steps": 1000, "later_steps": 0,
-        "hidden": 128, "channels": 16, "pool": 4, "exp_weight": 0.0, "relax": 0.0,
+        "hidden": 128, "channels": 16, "pool": 4, "target": "pooled", "exp_weight": 0.0,
+        "relax": 0.0,
         "latent_init": "random", "split_noise": 0.01, "remap": "state",
         "remap_input": "effect+embedding",
         "remap_steps": 1000, "remap_envs": 50, "remap_epsilon": 0.2, "remap_margin": 0.5,
@@ -170,193 +194,16 @@ ENV_OPTION_DEFAULTS: dict[str, dict[str, Any]] = {
     # Pooled frames keep at least ~1.6 pixels per cell: 8x8 maps up to 5x5, 16x16 for 10x10.
     "AbcoMaze3x3-v0": {"pool": 8},
     "AbcoMaze5x5-v0": {"pool": 8},
-    "AbcoMaze10x10-v0": {"pool": 4},
+    # 10x10 (docs/training.md, "ILPO on the 10x10 maze"): cells 6-7 pixels wide, which no
+    # fixed pooling keeps whole, so G predicts how much each cell changes (``target``
+    # "cells", a local G); its latents then mean one move everywhere, and a table maps them.
+    "AbcoMaze10x10-v0": {"pool": 4, "target": "cells", "relax": 0.05, "remap": "table",
+                         "policy_steps": 3000},
 }
 
 _REMAP_MODES = ("state", "table")
+_TARGETS = ("pooled", "cells")
 _REMAP_INPUTS = ("effect+embedding", "effect", "embedding")
-
-
-# -- the losses -------------------------------------------------------------------------------
-
-
-def latent_errors(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """``(B, k)`` mean squared error of each latent's prediction ``(B, k, D)`` to ``(B, D)``."""
-    return (pred - target.unsqueeze(1)).pow(2).mean(-1)
-
-
-def min_over_latents_loss(pred: torch.Tensor, target: torch.Tensor, relax: float = 0.0
-                          ) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
-    """``L_min``: the batch mean of ``min_z ||pred_z - target||^2`` and the best latents.
-
-    The gradient reaches only each row's best latent (the minimum's).
-
-    Args:
-        pred: ``(B, k, D)`` predictions, one per latent action.
-        target: ``(B, D)`` observed changes.
-
-    Returns:
-        The loss (a scalar) and ``(B,)`` the argmin latents ``z*``.
-
-    Example:
-        >>> pred = torch.tensor([[[0.0, 0.0], [1.0, 1.0]]])
-        >>> loss, best = min_over_latents_loss(pred, torch.tensor([[1.0, 1.0]]))
-        >>> float(loss), best.tolist()
-        (0.0, [1])
-    """
-    errors = latent_errors(pred, target)
-    best_error, best = errors.min(dim=1)
-    loss = best_error.mean()
-    if relax > 0.0:
-        loss = (1.0 - relax) * loss + relax * errors.mean()
-    return loss, best
-
-
-def expected_prediction_loss(probs: torch.Tensor, pred: torch.Tensor, target: torch.Tensor,
-                             pred_weight: float = 0.0) -> torch.Tensor:  # fmt: skip
-    """``L_exp``: the batch mean of ``||sum_z probs_z pred_z - target||^2``.
-
-    Args:
-        probs: ``(B, k)`` latent policy ``pi(z | s)``.
-        pred: ``(B, k, D)`` the latent forward model's predictions.
-        target: ``(B, D)`` observed changes.
-        pred_weight: How much of the gradient reaches ``pred`` (0: the predictions are held
-            fixed and only ``probs`` learns, as in the authors' code; 1: all of it). The value
-            of the loss does not depend on it.
-    """
-    if pred_weight <= 0.0:
-        pred = pred.detach()
-    elif pred_weight < 1.0:
-        pred = pred_weight * pred + (1.0 - pred_weight) * pred.detach()
-    expected = (probs.unsqueeze(-1) * pred).sum(1)
-    return (expected - target).pow(2).mean(-1).mean()
-
-
-# -- the networks ---------------------------------------------------------------------------
-
-
-class Standardise(nn.Module):
-    """``(x - mean) / std`` with fixed buffers."""
-
-    def __init__(self, mean: np.ndarray, std: np.ndarray) -> None:
-        super().__init__()
-        self.register_buffer("mean", torch.as_tensor(mean, dtype=torch.float32))
-        self.register_buffer("std", torch.as_tensor(std, dtype=torch.float32))
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Standardised ``x``."""
-        return (x.float() - self.mean) / self.std
-
-
-class VectorForwardModel(nn.Module):
-    """``G(E(s), z)`` for vector states: the standardised change each latent action makes.
-
-    ``E`` is a two-layer MLP; as in the authors' network, ``z``'s learnt embedding is added to
-    a linear map of ``E(s)`` (a linear layer over ``concat(E(s), onehot(z))``) and two more
-    layers map it to the prediction. All ``k`` latents are predicted in one pass.
-    """
-
-    def __init__(self, in_features: int, latents: int, hidden: int, mean: np.ndarray,
-                 std: np.ndarray) -> None:  # fmt: skip
-        super().__init__()
-        self.embedding = nn.Sequential(
-            Standardise(mean, std), nn.Linear(in_features, hidden), nn.LeakyReLU(0.2),
-            nn.Linear(hidden, hidden), nn.LeakyReLU(0.2),
-        )  # fmt: skip
-        self.state = nn.Linear(hidden, hidden)
-        self.latent = nn.Parameter(torch.randn(latents, hidden))
-        self.head = nn.Sequential(
-            nn.LeakyReLU(0.2), nn.Linear(hidden, hidden), nn.LeakyReLU(0.2),
-            nn.Linear(hidden, in_features),
-        )  # fmt: skip
-        self.embedding_features, self.out_features = hidden, in_features
-
-    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(E(s) of shape (B, F), predictions (B, k, D))``."""
-        h = self.embedding(obs)
-        return h, self.head(self.state(h).unsqueeze(1) + self.latent)
-
-
-class ImageForwardModel(nn.Module):
-    """``G(E(s), z)`` for frames: the pooled difference image each latent action makes.
-
-    Fully convolutional at the target's resolution (``H/pool x W/pool``): ``E`` is a strided
-    convolution to that grid and three 3x3 convolutions (dilations 1, 2, 4); ``z``'s learnt
-    embedding is added to every position's channels, and two 3x3 convolutions predict the
-    pooled difference. Every position applies the same filters, so a latent action means the
-    same move wherever the agent is (an MLP head over flat features is free to let latent 0
-    mean "down" in one cell and "right" in another, and does). ``E(s)`` is also returned
-    average-pooled to 4x4 (the remapping's view of the state).
-    """
-
-    def __init__(self, image_shape: tuple[int, int, int], latents: int, pool: int,
-                 channels: int) -> None:  # fmt: skip
-        super().__init__()
-        h, w, c = image_shape
-        ch = channels
-        self.embedding = nn.Sequential(
-            nn.Conv2d(c, ch, pool, stride=pool), nn.LeakyReLU(0.2),
-            nn.Conv2d(ch, ch, 3, padding=1), nn.LeakyReLU(0.2),
-            nn.Conv2d(ch, ch, 3, padding=2, dilation=2), nn.LeakyReLU(0.2),
-            nn.Conv2d(ch, ch, 3, padding=4, dilation=4), nn.LeakyReLU(0.2),
-        )  # fmt: skip
-        self.latent = nn.Parameter(torch.randn(latents, ch))
-        self.head = nn.Sequential(
-            nn.LeakyReLU(0.2), nn.Conv2d(ch, ch, 3, padding=1), nn.LeakyReLU(0.2),
-            nn.Conv2d(ch, c, 3, padding=1),
-        )  # fmt: skip
-        self.embedding_features = ch * 16
-        self.out_features = c * (h // pool) * (w // pool)
-
-    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(E(s) pooled to 4x4 and flattened (B, 16 C), predictions (B, k, D))``."""
-        grid = self.embedding(image_input(obs))
-        b, k = len(grid), len(self.latent)
-        mixed = grid.unsqueeze(1) + self.latent[None, :, :, None, None]
-        pred = self.head(mixed.flatten(0, 1)).reshape(b, k, -1)
-        return F.adaptive_avg_pool2d(grid, 4).flatten(1), pred
-
-
-def latent_policy(observation_shape: tuple[int, ...], latents: int, hidden: int,
-                  mean: np.ndarray | None = None, std: np.ndarray | None = None
-                  ) -> nn.Module:  # fmt: skip
-    """``pi(z | s)`` as logits: an MLP for vectors, the compact CNN (no attention) for frames."""
-    if len(observation_shape) == 1:
-        d = observation_shape[0]
-        return nn.Sequential(
-            Standardise(mean, std), nn.Linear(d, hidden), nn.LeakyReLU(0.2),
-            nn.Linear(hidden, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, latents),
-        )  # fmt: skip
-    cnn = CompactCNN(observation_shape, attention=False)  # type: ignore[arg-type]
-    return nn.Sequential(cnn, nn.Linear(cnn.out_features, hidden), nn.LeakyReLU(0.2),
-                         nn.Linear(hidden, latents))  # fmt: skip
-
-
-class ILPONet(nn.Module):
-    """The latent forward model ``G`` (with its embedding ``E``) and the latent policy ``pi``."""
-
-    def __init__(self, forward_model: nn.Module, policy: nn.Module) -> None:
-        super().__init__()
-        self.forward_model, self.policy = forward_model, policy
-
-    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """``(E(s), G(E(s), .) of shape (B, k, D), pi's logits (B, k))``."""
-        h, pred = self.forward_model(obs)
-        return h, pred, self.policy(obs)
-
-
-class RemapNet(nn.Module):
-    """``P(a | s, z)``: a small classifier over features of ``(s, z)`` (``ILPO._remap_input``)."""
-
-    def __init__(self, in_features: int, n_actions: int, hidden: int = 64) -> None:
-        super().__init__()
-        self.body = nn.Sequential(
-            nn.Linear(in_features, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, n_actions),
-        )  # fmt: skip
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Action logits."""
-        return self.body(x)
 
 
 # -- the method -----------------------------------------------------------------------------
@@ -409,6 +256,9 @@ class ILPO(Method):
         if opts["latent_init"] not in ("random", "shared"):
             raise ConfigError(f"ilpo option latent_init must be random or shared, got "
                               f"{opts['latent_init']!r}")  # fmt: skip
+        if opts["target"] not in _TARGETS or (opts["target"] == "cells" and kind != "maze"):
+            raise ConfigError(f"ilpo option target must be one of {_TARGETS} (cells: mazes "
+                              f"only), got {opts['target']!r}")  # fmt: skip
         if opts["remap"] not in _REMAP_MODES:
             raise ConfigError(f"ilpo option remap must be one of {_REMAP_MODES}, got "
                               f"{opts['remap']!r}")  # fmt: skip
@@ -429,12 +279,15 @@ class ILPO(Method):
         hidden = int(opts["hidden"])
         if self.images:
             self.pool = int(opts["pool"])
+            self.cells = (CellAverage(abco_envs.maze_size(config.env), *shape[:2], total=True)
+                          if opts["target"] == "cells" else None)  # fmt: skip
             pooled = self._pooled_delta(self.expert_obs[self.expert_t],
                                         self.expert_obs[self.expert_t + 1])  # fmt: skip
             self.delta_scale = float(pooled.pow(2).mean().sqrt().clamp_min(1e-8))
             self.expert_targets = pooled / self.delta_scale
-            forward_model: nn.Module = ImageForwardModel(shape, self.k, self.pool,
-                                                         int(opts["channels"]))  # fmt: skip
+            forward_model: nn.Module = ImageForwardModel(
+                shape, self.k, self.pool, int(opts["channels"]),
+                None if self.cells is None else self.cells.grid)
             policy = latent_policy(shape, self.k, hidden)
         else:
             states = data.expert_obs.astype(np.float64)
@@ -468,13 +321,16 @@ class ILPO(Method):
     # -- targets ------------------------------------------------------------------------------
 
     def _pooled_delta(self, s: torch.Tensor, s1: torch.Tensor, chunk: int = 1024) -> torch.Tensor:
-        """``avgpool(s' - s)`` of frames, flattened (``(B, C * H/p * W/p)``, CPU float32)."""
+        """``avgpool(s' - s)`` of frames, flattened (``(B, C * H/p * W/p)``, CPU float32),
+        or with ``target="cells"`` the sum of ``|s' - s|`` over each maze cell (``(B, n n)``)."""
         out = []
         for start in range(0, len(s), chunk):
             a = s[start : start + chunk].float().div_(255.0)
             b = s1[start : start + chunk].float().div_(255.0)
             d = (b - a).permute(0, 3, 1, 2)
-            if self.pool > 1:
+            if self.cells is not None:  # how much each cell changed, whatever its colours
+                d = self.cells(d.abs().sum(1, keepdim=True))
+            elif self.pool > 1:
                 d = F.avg_pool2d(d, self.pool)
             out.append(d.flatten(1))
         return torch.cat(out) if out else torch.zeros(0)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
@@ -12,7 +13,7 @@ from train_testing import tiny_config
 import abco_envs
 from abco_train.config import ConfigError
 from abco_train.data import load_training_data
-from abco_train.ilpo import ILPO, expected_prediction_loss, min_over_latents_loss
+from abco_train.ilpo import ILPO, CellAverage, expected_prediction_loss, min_over_latents_loss
 from abco_train.methods import INTERACTION_KINDS, available, resolve_config
 from abco_train.train import seed_everything, train
 
@@ -152,7 +153,8 @@ def test_ilpo_options(tiny_data, tmp_path):
     assert method.interactions["pre_demonstration"] == 0
     cfg.method_options["latents"] = 5
     assert ILPO(cfg, data, seed_everything(0)).k == 5
-    for bad in ({"latent": 3}, {"latents": 1}, {"remap": "nearest"}, {"remap_epsilon": 2.0}):
+    for bad in ({"latent": 3}, {"latents": 1}, {"remap": "nearest"}, {"remap_epsilon": 2.0},
+                {"target": "cells"}):  # cells: mazes only
         with pytest.raises(ConfigError, match="ilpo option"):
             ILPO(cfg.replace(method_options=bad), data, seed_everything(0))
 
@@ -247,3 +249,54 @@ def test_policy_action_accuracy_scores_what_act_does(tiny_data, tmp_path):
     z, _, _ = method._latents_of(method.expert_obs[method.expert_t],
                                  method.expert_obs[method.expert_t + 1])  # fmt: skip
     assert (labels == z.numpy()).all()
+
+
+# -- the cell-aligned target (``target="cells"``) -----------------------------------------------
+
+
+def test_cell_average_takes_each_rendered_cell_exactly():
+    """Cells 6 or 7 pixels wide (10x10 in 64 pixels): each output is its own cell's mean."""
+    edges = np.round(np.linspace(0, 64, 11)).astype(int)
+    assert set(np.diff(edges)) == {6, 7}
+    values = torch.arange(100, dtype=torch.float32).reshape(10, 10)
+    image = torch.zeros(1, 1, 64, 64)
+    for i in range(10):
+        for j in range(10):
+            image[0, 0, edges[i] : edges[i + 1], edges[j] : edges[j + 1]] = values[i, j]
+    assert torch.allclose(CellAverage(10, 64, 64)(image)[0, 0], values)
+    sizes = torch.from_numpy(np.diff(edges).astype(np.float32))
+    total = CellAverage(10, 64, 64, total=True)(torch.ones(1, 1, 64, 64))[0, 0]
+    assert torch.equal(total, sizes[:, None] * sizes[None, :])  # total: each cell's pixel sum
+
+
+def test_the_cell_target_is_one_pattern_for_a_move_anywhere(tiny_data, tmp_path):
+    """10x10's default target: how much each cell changed. A move from a 6-pixel cell to a
+    7-pixel one and one between two 6-pixel cells give the same two values, at the two cells
+    and nowhere else (a fixed 4-pixel pooling cuts the cells at other offsets in each case);
+    a move into the red goal cell changes the same two cells (the goal's by less)."""
+    cfg = resolve_config(_config("AbcoMaze10x10-v0", tiny_data, tmp_path))
+    method = ILPO(cfg, load_training_data(cfg), seed_everything(0))
+    assert method.opts["target"] == "cells" and method.expert_targets.shape[1] == 100
+    env = gym.make("AbcoMaze10x10-v0")
+    env.reset(seed=0)
+    maze = env.unwrapped
+
+    def frame(r: int, c: int) -> torch.Tensor:
+        return torch.from_numpy(maze.renderer.draw_agent(maze._background.copy(), r, c))[None]
+
+    patterns = []
+    for (r, c), (r1, c1) in (((2, 2), (2, 3)), ((5, 4), (5, 5)), ((8, 9), (9, 9))):
+        target = method._targets(frame(r, c), frame(r1, c1)).reshape(10, 10)
+        assert (target > 0).nonzero().tolist() == sorted([[r, c], [r1, c1]])
+        patterns.append(sorted([float(target[r, c]), float(target[r1, c1])]))
+    env.close()
+    assert patterns[0] == pytest.approx(patterns[1])
+    assert 0 < patterns[2][0] < patterns[0][0] and patterns[2][1] == pytest.approx(patterns[0][1])
+
+
+def test_ilpo_trains_on_the_cell_target(tiny_data, tmp_path):
+    cfg = _config("AbcoMaze5x5-v0", tiny_data, tmp_path)
+    cfg.method_options["target"] = "cells"
+    method = ILPO(resolve_config(cfg), load_training_data(resolve_config(cfg)), seed_everything(0))
+    assert method.expert_targets.shape[1] == 5 * 5  # one value per cell
+    assert train(cfg)["status"] == "ok"
