@@ -198,7 +198,7 @@ ENV_OPTION_DEFAULTS: dict[str, dict[str, Any]] = {
     # fixed pooling keeps whole, so G predicts how much each cell changes (``target``
     # "cells", a local G); its latents then mean one move everywhere, and a table maps them.
     "AbcoMaze10x10-v0": {"pool": 4, "target": "cells", "relax": 0.05, "remap": "table",
-                         "policy_steps": 3000},
+                         "policy_steps": 10000},
 }
 
 _REMAP_MODES = ("state", "table")
