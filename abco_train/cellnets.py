@@ -12,6 +12,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from abco_envs.maze.render import cell_edges
 from abco_envs.maze.rules import DELTAS
 from abco_train.layers import SelfAttention2d, image_input
 
@@ -30,8 +31,7 @@ def cell_centres(grid: int, height: int, width: int) -> torch.Tensor:
     image's extent (``align_corners=False``), so they address any feature map that covers
     the whole image.
     """
-    rows = np.round(np.linspace(0, height, grid + 1))
-    cols = np.round(np.linspace(0, width, grid + 1))
+    rows, cols = cell_edges(grid, height), cell_edges(grid, width)
     y = (rows[:-1] + rows[1:]) / height - 1.0  # the middle of each band of rows, normalised
     x = (cols[:-1] + cols[1:]) / width - 1.0
     yy, xx = np.meshgrid(y, x, indexing="ij")

@@ -12,6 +12,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from abco_envs.maze.render import cell_edges
 from abco_train.nets import CompactCNN, image_input
 
 __all__ = ["latent_errors", "min_over_latents_loss", "expected_prediction_loss", "Standardise",
@@ -123,8 +124,8 @@ class CellAverage(nn.Module):
     """The mean (``total``: the sum) of a ``(B, C, H, W)`` map over each cell of an
     ``n x n`` maze: ``(B, C, n, n)``.
 
-    Cell borders fall where the renderer draws them (``round(k * H / n)``,
-    :class:`abco_envs.maze.render.MazeRenderer`), so every cell takes exactly its own pixels
+    Cell borders fall where the renderer draws them (:func:`abco_envs.maze.render.cell_edges`),
+    so every cell takes exactly its own pixels
     (``target="cells"``, module docstring).
     """
 
@@ -137,7 +138,7 @@ class CellAverage(nn.Module):
     @staticmethod
     def _means(grid: int, size: int, total: bool) -> torch.Tensor:
         """``(grid, size)``: row ``i`` averages (``total``: sums) the pixels of band ``i``."""
-        edges = np.round(np.linspace(0, size, grid + 1)).astype(int)
+        edges = cell_edges(grid, size)
         m = np.zeros((grid, size), dtype=np.float32)
         for i in range(grid):
             m[i, edges[i] : edges[i + 1]] = 1.0 if total else 1.0 / (edges[i + 1] - edges[i])

@@ -11,7 +11,7 @@ import numpy as np
 
 from abco_envs.maze.rules import OPEN_E, OPEN_N, OPEN_S, OPEN_W, START_POSITION, goal_position
 
-__all__ = ["MazeRenderer", "FLOOR", "WALL", "START", "GOAL", "AGENT", "PATH"]
+__all__ = ["MazeRenderer", "cell_edges", "FLOOR", "WALL", "START", "GOAL", "AGENT", "PATH"]
 
 FLOOR = np.array([255, 255, 255], dtype=np.uint8)
 WALL = np.array([0, 0, 0], dtype=np.uint8)
@@ -19,6 +19,16 @@ START = np.array([110, 150, 255], dtype=np.uint8)  # blue start cell, lighter th
 GOAL = np.array([230, 30, 30], dtype=np.uint8)
 AGENT = np.array([0, 0, 200], dtype=np.uint8)
 PATH = np.array([255, 160, 0], dtype=np.uint8)  # orange: visible on white, blue and red
+
+
+def cell_edges(n: int, size: int) -> np.ndarray:
+    """``(n + 1,)`` pixel borders of ``n`` cells across ``size`` pixels: ``round(k * size / n)``.
+
+    Example:
+        >>> cell_edges(10, 64).tolist()
+        [0, 6, 13, 19, 26, 32, 38, 45, 51, 58, 64]
+    """
+    return np.round(np.linspace(0, size, n + 1)).astype(int)
 
 
 class MazeRenderer:
@@ -40,8 +50,7 @@ class MazeRenderer:
                 f" at least 2 pixels per cell are needed ({2 * n}x{2 * n})"
             )
         self.n, self.height, self.width = n, height, width
-        self.rows = np.round(np.linspace(0, height, n + 1)).astype(int)
-        self.cols = np.round(np.linspace(0, width, n + 1)).astype(int)
+        self.rows, self.cols = cell_edges(n, height), cell_edges(n, width)
         cell = min(height, width) / n
         self.wall = max(1, int(round(cell / 12)))
         self.dot_pixels = self._dot_pixels(cell)
