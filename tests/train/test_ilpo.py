@@ -151,6 +151,10 @@ def test_ilpo_options(tiny_data, tmp_path):
     assert method.k == data.n_actions == 3  # default: as many latents as actions
     assert method.opts["remap_margin"] == 0.1  # classic control: only clearly explained steps
     assert method.interactions["pre_demonstration"] == 0
+    # Acrobot's own default on top of classic control's (CartPole keeps 500 steps a round)
+    assert ILPO.options(cfg.replace(method_options={}), 3)["remap_steps"] == 1000
+    cartpole = resolve_config(_config("CartPole-v1", tiny_data, tmp_path))
+    assert ILPO.options(cartpole.replace(method_options={}), 2)["remap_steps"] == 500
     cfg.method_options["latents"] = 5
     assert ILPO(cfg, data, seed_everything(0)).k == 5
     for bad in ({"latent": 3}, {"latents": 1}, {"remap": "nearest"}, {"remap_epsilon": 2.0},
