@@ -330,7 +330,29 @@ def wall(runs_dir: Path, grid: Grid) -> tuple[float | None, list[str]]:
                      f" results.jsonl): {own:.1f} s of their own wall time, {own / jobs:.1f} s"
                      f" at {jobs} job(s) at once, counted in the grid's wall time"
                      f" ({wall_s:.1f} s, {wall_s / 3600:.2f} h).")  # fmt: skip
-    return wall_s, lines
+    return wall_s, lines + _where_it_goes(grid, cell_wall)
+
+
+def _where_it_goes(grid: Grid, cell_wall: float) -> list[str]:
+    """Where the cells' own wall time goes: per env its share, and its three dearest methods."""
+    by_env: dict[str, dict[str, float]] = {}
+    counts: dict[str, int] = {}
+    for r in grid.done:
+        spent = by_env.setdefault(r.env, {})
+        spent[r.method] = spent.get(r.method, 0.0) + float(r.row.get("wall_s") or 0.0)
+        counts[r.env] = counts.get(r.env, 0) + 1
+    if not by_env or cell_wall <= 0:
+        return []
+    lines = ["", "Where the cells' own wall time goes:", "",
+             "| Env | Cells | Cell time (s) | Share | Dearest methods (s) |",
+             "|---|---|---|---|---|"]
+    for env in sorted(by_env, key=lambda e: -sum(by_env[e].values())):
+        total = sum(by_env[env].values())
+        dearest = sorted(by_env[env].items(), key=lambda kv: -kv[1])[:3]
+        names = ", ".join(f"{LABELS.get(m, m)} {t:,.0f}" for m, t in dearest)
+        lines.append(f"| {env} | {counts[env]} | {total:,.0f} | {total / cell_wall:.0%}"
+                     f" | {names} |")
+    return lines
 
 
 def generalisation_cells(runs: Sequence[Run]) -> dict[tuple[str, str, int | None], list[Run]]:

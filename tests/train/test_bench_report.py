@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from abco_train import aggregate
+from abco_train import aggregate, report_grid
 from abco_train.cli import main as abco_main
 from abco_train.report import GOALS, TABLE1_ENVS, table_evaluation, write_report
 from abco_train.stats import iqm
@@ -296,3 +296,9 @@ def test_reused_cells_count_in_the_wall_time(synthetic: Path, tmp_path: Path) ->
     assert "1 cell ran outside these sessions" in md and "3600.0 s at 2 job(s)" in md
     assert "Grid wall time 270.0 min" in md and "**over by 30.0 min**" in md
     assert md.count("stopped before its end") == 1
+    # where the time goes: the env of the 7,200 s cell leads, with that cell's method first
+    part = _section(md, "## Wall time")
+    table = [x for x in part.splitlines() if x.startswith("| ") and "Cell time" not in x]
+    assert table and table[0].startswith(f"| {rows[0]['env']} |")
+    assert "7,2" in table[0].split("|")[3] and table[0].split("|")[5].strip().startswith(
+        report_grid.LABELS.get(rows[0]["method"], rows[0]["method"]))
