@@ -17,7 +17,8 @@ Example:
     'abco/cartpole-pre-v0'
 """
 
-from abco_data.dataset import Dataset, DatasetArrays, Episode, open_dataset
+from abco_data.arrays import DatasetArrays, Episode
+from abco_data.dataset import Dataset, open_dataset
 from abco_data.errors import (
     ChecksumError,
     CorruptDatasetError,

@@ -1,4 +1,6 @@
-"""Reading abco datasets: :func:`open_dataset`, :class:`Dataset` and :class:`Episode`.
+"""Reading abco datasets: :func:`open_dataset` and :class:`Dataset`, whose readers return the
+in-memory records of :mod:`abco_data.arrays` (:class:`~abco_data.arrays.Episode`,
+:class:`~abco_data.arrays.DatasetArrays`).
 
 A transition ``k`` pairs observation rows ``obs_t[k]`` and ``obs_t[k] + 1`` of the flat
 ``observations`` column; both always lie in the same episode (each episode stores its ``T + 1``
@@ -12,6 +14,7 @@ column, which its readers read and nothing beyond.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -22,6 +25,7 @@ import h5py
 import numpy as np
 from gymnasium import spaces
 
+from abco_data.arrays import DatasetArrays, Episode
 from abco_data.errors import CorruptDatasetError, WrongKindError
 from abco_data.format import (
     ACTIONS,
@@ -36,69 +40,15 @@ from abco_data.format import (
     action_column,
     episode_column,
     expected_rows,
+    h5_column,
     hdf5_errors,
     open_h5,
 )
 from abco_data.header import read_header, read_whole_column
 from abco_data.reference import ReferenceReturns
-from abco_data.values import check_values
+from abco_data.validation import check_values
 
-__all__ = ["Dataset", "Episode", "DatasetArrays", "open_dataset", "check_layout_count"]
-
-
-@dataclass(frozen=True, eq=False)
-class Episode:
-    """One episode: ``T + 1`` observations and ``T`` of everything else.
-
-    ``actions`` is ``None`` for expert data (whose actions are kept apart, for measuring IDM
-    accuracy only). ``layout``, ``layout_index`` and ``positions`` are ``None`` outside mazes.
-    """
-
-    index: int
-    seed: int
-    observations: np.ndarray
-    actions: np.ndarray | None
-    rewards: np.ndarray
-    terminations: np.ndarray
-    truncations: np.ndarray
-    episode_return: float
-    layout: np.ndarray | None = None
-    layout_index: int | None = None
-    positions: np.ndarray | None = None
-
-    @property
-    def length(self) -> int:
-        """Number of transitions ``T``."""
-        return len(self.rewards)
-
-
-@dataclass(frozen=True, eq=False)
-class DatasetArrays:
-    """Every column of a dataset in memory (see ``docs/format.md`` for each one).
-
-    ``actions`` is set for pre-demonstrations, ``idm_eval_actions`` for expert data (never
-    for training). Maze-only columns are ``None`` elsewhere.
-    """
-
-    observations: np.ndarray
-    actions: np.ndarray | None
-    idm_eval_actions: np.ndarray | None
-    rewards: np.ndarray
-    terminations: np.ndarray
-    truncations: np.ndarray
-    episode_starts: np.ndarray
-    episode_transition_starts: np.ndarray
-    episode_lengths: np.ndarray
-    episode_seeds: np.ndarray
-    episode_returns: np.ndarray
-    positions: np.ndarray | None = None
-    layouts: np.ndarray | None = None
-    layout_indices: np.ndarray | None = None
-
-    @property
-    def nbytes(self) -> int:
-        """Total bytes of the arrays."""
-        return sum(v.nbytes for v in vars(self).values() if isinstance(v, np.ndarray))
+__all__ = ["Dataset", "open_dataset", "check_layout_count"]
 
 
 #: The column of each field of :class:`DatasetArrays` but ``observations``.
@@ -141,7 +91,7 @@ class Dataset:
     num_transitions: int
     attrs: Mapping[str, Any]
     observation_space: spaces.Space[Any]
-    action_space: spaces.Space[Any]
+    action_space: spaces.Discrete
     reference: ReferenceReturns
     layouts_taken: int | None = None
     _index: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
@@ -184,7 +134,7 @@ class Dataset:
         if not self._index:
             f = self._file()
             with hdf5_errors(self.path, "episode offsets"):
-                index = {key: read_whole_column(f[episode_column(key)], self.path,
+                index = {key: read_whole_column(h5_column(f, episode_column(key)), self.path,
                                                 self.num_episodes)
                          for key in EPISODE_COLUMNS}
             self._index.update(index)
@@ -200,8 +150,8 @@ class Dataset:
         if not self.num_episodes:
             return np.zeros(0, dtype=np.int64)
         with hdf5_errors(self.path, "column episodes/layout_index"):
-            order = read_whole_column(self._file()[episode_column("layout_index")], self.path,
-                                      self.num_episodes)
+            column = h5_column(self._file(), episode_column("layout_index"))
+            order = read_whole_column(column, self.path, self.num_episodes)
         starts = np.flatnonzero(np.concatenate([[True], order[1:] != order[:-1]]))
         if len(np.unique(order[starts])) != len(starts):
             raise CorruptDatasetError(f"{self.path}: episodes are not grouped by layout (a"
@@ -272,16 +222,17 @@ class Dataset:
         o, t, n = (int(idx[k][i]) for k in ("obs_offset", "transition_offset", "length"))
         maze = POSITIONS in f
         with hdf5_errors(self.path, f"episode {i}"):
+            col = functools.partial(h5_column, f)
             episode = Episode(
                 index=i, seed=int(idx["seed"][i]), observations=self._read_obs(o, o + n + 1),
-                actions=f[ACTIONS][t : t + n] if self.action_column == ACTIONS else None,
-                rewards=f[REWARDS][t : t + n], terminations=f[TERMINATIONS][t : t + n],
-                truncations=f[TRUNCATIONS][t : t + n], episode_return=float(idx["return"][i]),
-                layout=f[episode_column("layout")][i] if maze else None,
-                layout_index=int(f[episode_column("layout_index")][i]) if maze else None,
-                positions=f[POSITIONS][o : o + n + 1] if maze else None,
+                actions=col(ACTIONS)[t : t + n] if self.action_column == ACTIONS else None,
+                rewards=col(REWARDS)[t : t + n], terminations=col(TERMINATIONS)[t : t + n],
+                truncations=col(TRUNCATIONS)[t : t + n], episode_return=float(idx["return"][i]),
+                layout=col(episode_column("layout"))[i] if maze else None,
+                layout_index=int(col(episode_column("layout_index"))[i]) if maze else None,
+                positions=col(POSITIONS)[o : o + n + 1] if maze else None,
             )
-        check_values(_episode_arrays(episode, self.action_column),
+        check_values(DatasetArrays.of_episode(episode),
                      action_count=self.action_space.n, path=f"{self.path} (episode {i})",
                      observation_space=self.observation_space)
         return episode
@@ -306,7 +257,7 @@ class Dataset:
         rows = expected_rows(self.kind, self.num_episodes, self.num_transitions,
                              maze=POSITIONS in f)  # a view's prefix, or every row
         with hdf5_errors(self.path, "columns"):
-            cols = {name: read_whole_column(f[col], self.path, rows.get(col))
+            cols = {name: read_whole_column(h5_column(f, col), self.path, rows.get(col))
                     if col in f else None for name, col in _ARRAY_COLUMNS.items()}
         n_obs = self.num_transitions + self.num_episodes
         obs = self._read_obs(0, n_obs, np.empty((n_obs, *reader.shape[1:]), dtype=reader.dtype))
@@ -359,7 +310,7 @@ class Dataset:
                 f"{self.path}: expert data has no training actions; its idm_eval_actions are"
                 " for measuring IDM accuracy only (pass idm_eval=True to read them)")
         with hdf5_errors(self.path, f"column {self.action_column}"):
-            actions = read_whole_column(self._file()[self.action_column], self.path,
+            actions = read_whole_column(h5_column(self._file(), self.action_column), self.path,
                                         self.num_transitions)
         if len(actions) and (actions.min() < 0 or actions.max() >= self.action_space.n):
             raise CorruptDatasetError(f"{self.path}: {self.action_column} outside the action"
@@ -416,19 +367,6 @@ def check_layout_count(k: object, available: int, what: str, dataset_id: str) ->
         raise ValueError(f"{what} is out of range: {dataset_id} has {available} layouts; take"
                          f" from 1 to {available}")
     return int(k)
-
-
-def _episode_arrays(ep: Episode, action_column: str) -> DatasetArrays:
-    """The arrays of one episode, offsets relative to it (for :func:`check_values`)."""
-    first = np.zeros(1, dtype=np.int64)
-    return DatasetArrays(
-        observations=ep.observations, actions=ep.actions, idm_eval_actions=None,
-        rewards=ep.rewards, terminations=ep.terminations, truncations=ep.truncations,
-        episode_starts=first, episode_transition_starts=first,
-        episode_lengths=np.array([ep.length]), episode_seeds=np.array([ep.seed]),
-        episode_returns=np.array([ep.episode_return]), positions=ep.positions,
-        layouts=None if ep.layout is None else ep.layout[None],
-        layout_indices=None if ep.layout_index is None else np.array([ep.layout_index]))
 
 
 def open_dataset(path: str | os.PathLike[str], *, dataset_id: str | None = None,

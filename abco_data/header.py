@@ -25,6 +25,7 @@ from abco_data.format import (
     check_header,
     episode_column,
     expected_rows,
+    h5_column,
     hdf5_errors,
     read_column,
     space_from_json,
@@ -100,7 +101,7 @@ def _reference(f: h5py.File, attrs: Mapping[str, Any], path: Path) -> ReferenceR
     random_mean = _finite_float(attrs, "reference_random_mean", path)
     if REFERENCE_COLUMNS[0] not in f:
         return ReferenceReturns(expert_mean, random_mean)
-    ids, splits, expert, random = (f[c][()] for c in REFERENCE_COLUMNS)
+    ids, splits, expert, random = (h5_column(f, c)[()] for c in REFERENCE_COLUMNS)
     try:
         ids, splits = (tuple(s.decode() for s in column) for column in (ids, splits))
     except (AttributeError, UnicodeDecodeError) as err:  # not byte strings
@@ -156,13 +157,13 @@ def _check_counts(f: h5py.File, attrs: Mapping[str, Any], path: Path) -> None:
     for col, n in expected_rows(attrs["kind"], n_ep, n_tr, maze=POSITIONS in f).items():
         if col not in f:
             raise CorruptDatasetError(f"{path}: missing column {col}")
-        if f[col].shape[:1] != (n,):
-            raise CorruptDatasetError(f"{path}: column {col} has shape {f[col].shape},"
+        ds = h5_column(f, col)
+        if ds.shape[:1] != (n,):
+            raise CorruptDatasetError(f"{path}: column {col} has shape {ds.shape},"
                                       f" expected {n} rows from the root attributes")
-        _check_chunks(f[col], path, file_size)
-    lengths = read_whole_column(f[episode_column("length")], path)
-    starts = read_whole_column(f[episode_column("transition_offset")], path)
-    obs_starts = read_whole_column(f[episode_column("obs_offset")], path)
+        _check_chunks(ds, path, file_size)
+    lengths, starts, obs_starts = (read_whole_column(h5_column(f, episode_column(key)), path)
+                                   for key in ("length", "transition_offset", "obs_offset"))
     cum = np.concatenate([[0], np.cumsum(lengths)[:-1]]) if n_ep else lengths
     if (lengths.sum() != n_tr or np.any(lengths < 1) or np.any(starts != cum)
             or np.any(obs_starts != starts + np.arange(n_ep))):

@@ -32,7 +32,8 @@ from minari.data_collector import EpisodeBuffer
 from minari.namespace import create_namespace, list_local_namespaces
 
 import abco_envs  # noqa: F401  (registers the maze ids that the datasets' env specs name)
-from abco_data.dataset import Dataset, DatasetArrays, open_dataset
+from abco_data.arrays import DatasetArrays
+from abco_data.dataset import Dataset, open_dataset
 from abco_data.files import atomic_target, remove_path, temporary_name
 from abco_data.format import ACTIONS, IDM_EVAL_ACTIONS
 

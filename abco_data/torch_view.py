@@ -21,19 +21,36 @@ Example:
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import Any, Protocol
 
 import numpy as np
 import torch
+from gymnasium import spaces
 from torch.utils.data import Dataset as TorchDataset
 
+from abco_data.arrays import DatasetArrays
 from abco_data.format import ACTIONS, LazyH5File, ObservationReader
-from abco_data.values import check_observations
+from abco_data.validation import check_observations
 
-if TYPE_CHECKING:  # typing only: abco_data.dataset imports this module, not the reverse
-    from abco_data.dataset import Dataset
+__all__ = ["TransitionDataset", "TransitionSource"]
 
-__all__ = ["TransitionDataset"]
+
+class TransitionSource(Protocol):
+    """What :class:`TransitionDataset` reads of an opened dataset (an :class:`abco_data.Dataset`
+    is one; this module does not import :mod:`abco_data.dataset`, which imports it)."""
+
+    @property
+    def path(self) -> Path: ...
+    @property
+    def kind(self) -> str: ...
+    @property
+    def action_column(self) -> str: ...
+    @property
+    def observation_space(self) -> spaces.Space[Any]: ...
+    def transition_index(self) -> tuple[np.ndarray, np.ndarray]: ...
+    def actions_of_transitions(self, *, idm_eval: bool = False) -> np.ndarray: ...
+    def load_arrays(self) -> DatasetArrays: ...
 
 
 class TransitionDataset(TorchDataset):
@@ -51,7 +68,7 @@ class TransitionDataset(TorchDataset):
         TypeError: ``dataset`` is not an opened dataset (a path, say).
     """
 
-    def __init__(self, dataset: Dataset, in_memory: bool = False,
+    def __init__(self, dataset: TransitionSource, in_memory: bool = False,
                  indices: np.ndarray | None = None, idm_eval_actions: bool = False) -> None:
         if not hasattr(dataset, "transition_index"):
             raise TypeError(f"TransitionDataset takes an opened dataset, not {dataset!r}: use"

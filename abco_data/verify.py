@@ -22,11 +22,12 @@ from typing import TypeVar
 
 import numpy as np
 
+from abco_data.arrays import DatasetArrays
 from abco_data.checksum import ExpectedDigest, check_checksum, expected_digest
-from abco_data.child import run_in_child
-from abco_data.dataset import Dataset, DatasetArrays, open_dataset
+from abco_data.dataset import Dataset, open_dataset
 from abco_data.errors import ChecksumError, CorruptDatasetError, WrongKindError
 from abco_data.files import file_digest, sha256_of
+from abco_data.forked_call import run_in_child
 from abco_data.generate import layout_split
 from abco_data.manifest import Manifest, as_manifest, cached_path, known_ids
 from abco_envs.maze.procedural import PROCEDURAL_SPLIT_SIZE
@@ -123,7 +124,7 @@ def _check_maze(a: DatasetArrays, ds: Dataset, path: Path) -> int:
 
 def _check_values(ds: Dataset) -> int:
     """Every value of ``ds`` (see the module docstring); returns the frames re-rendered."""
-    a = ds.load_arrays()  # finite values, spaces, episode ends: abco_data.values
+    a = ds.load_arrays()  # finite values, spaces, episode ends: abco_data.validation
     return _check_maze(a, ds, ds.path) if a.positions is not None else 0
 
 

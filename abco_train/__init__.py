@@ -1,9 +1,11 @@
 """abco_train: ABCO(alpha) and its baselines, trained on abco datasets, evaluated one way.
 
-``abco train --env AbcoMaze5x5-v0 --method abco --seed 0`` runs :func:`abco_train.train.train`
-on :class:`abco_train.config.RunConfig`'s defaults. Importing this package does not import torch;
+``abco train --env AbcoMaze5x5-v0 --method abco --seed 0`` runs
+:func:`abco_train.harness.loop.train`
+on :class:`abco_train.config.run.RunConfig`'s defaults. Importing this package does not import
+torch;
 its modules do. A trained policy: ``abco_train.load_policy(run_dir)``
-(:mod:`abco_train.policy`).
+(:mod:`abco_train.harness.trained_policy`).
 """
 
 from typing import Any
@@ -26,7 +28,7 @@ __all__ = ["__version__", "load_policy", "Policy"]
 def __getattr__(name: str) -> Any:
     # ``abco_train.load_policy`` without importing torch on ``import abco_train``.
     if name in ("load_policy", "Policy"):
-        from abco_train import policy
+        from abco_train.harness import trained_policy as policy
 
         return getattr(policy, name)
     raise AttributeError(f"module 'abco_train' has no attribute {name!r}")

@@ -1,8 +1,8 @@
 """The ``abco`` command: ``train``, ``bench``, ``report``, ``play`` and ``data``.
 
-Every field of :class:`abco_train.config.RunConfig` is an option of ``abco train`` and an
+Every field of :class:`abco_train.config.run.RunConfig` is an option of ``abco train`` and an
 override of ``abco bench`` (``--idm-epochs 3``, ``--no-attention``, ...), generated from the
-config once (:func:`abco_train.config.add_config_options`); unset ones take the defaults of
+config once (:func:`abco_train.config.run.add_config_options`); unset ones take the defaults of
 the env, preset and method.
 
 This module owns the exit codes: 0 success; 2 bad input (an option, a file, a dataset, a
@@ -26,7 +26,7 @@ from typing import Any
 from abco_data.cli import add_subcommands as add_data_subcommands
 from abco_data.errors import DatasetError
 from abco_train import __version__
-from abco_train.config import ConfigError, add_config_options, config_from_args
+from abco_train.config.run import ConfigError, add_config_options, config_from_args
 
 __all__ = ["build_parser", "main"]
 
@@ -35,10 +35,10 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     """Exceptions that mean bad input: printed as one line, exit code 2."""
     from gymnasium.error import DependencyNotInstalled
 
-    from abco_train.backends import BackendError
-    from abco_train.methods import PluginError
-    from abco_train.report import ReportError
-    from abco_train.run_folder import RunFolderError
+    from abco_train.bench.backends import BackendError
+    from abco_train.harness.run_folder import RunFolderError
+    from abco_train.methods.registry import PluginError
+    from abco_train.report.write import ReportError
 
     return (ConfigError, DatasetError, PluginError, ReportError, BackendError, RunFolderError,
             DependencyNotInstalled)  # fmt: skip
@@ -48,11 +48,11 @@ def _user_errors() -> tuple[type[BaseException], ...]:
 
 
 def _train(args: argparse.Namespace) -> int:
-    from abco_train.methods import load_plugins, resolve_config
+    from abco_train.methods.registry import load_plugins, resolve_config
 
     load_plugins(args.plugin)
     config = resolve_config(config_from_args(args))  # every option checked before any work
-    from abco_train.train import format_table, train
+    from abco_train.harness.loop import format_table, train
 
     final = train(config)
     if final is None:
@@ -72,8 +72,15 @@ def _train(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace) -> int:
     from dataclasses import fields
 
-    from abco_train.config import RunConfig
-    from abco_train.grid import CELL_FIELDS, parse_layouts, parse_list, parse_seeds, plan, run_grid
+    from abco_train.bench.grid import (
+        CELL_FIELDS,
+        parse_layouts,
+        parse_list,
+        parse_seeds,
+        plan,
+        run_grid,
+    )
+    from abco_train.config.run import RunConfig
 
     overrides = {f.name: getattr(args, f.name) for f in fields(RunConfig)
                  if f.name not in CELL_FIELDS and getattr(args, f.name, None) is not None}
@@ -89,7 +96,7 @@ def _bench(args: argparse.Namespace) -> int:
 
 
 def _bench_options(parser: argparse.ArgumentParser) -> None:
-    from abco_train.backends import BACKENDS
+    from abco_train.bench.backends import BACKENDS
 
     parser.add_argument("--envs", required=True, help="comma-separated env ids")
     parser.add_argument("--methods", required=True, help="comma-separated method names")
@@ -121,7 +128,7 @@ def _positive(text: str) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from abco_train.report import write_report
+    from abco_train.report.write import write_report
 
     files = write_report(args.runs_dir, args.out, args.labels_env, args.baseline)
     print(f"report: {files['report']}\ncsv: {files['csv']}")
@@ -142,8 +149,8 @@ def _report_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _play(args: argparse.Namespace) -> int:
-    from abco_train.grid import parse_seeds
-    from abco_train.policy import load_policy, record_gif
+    from abco_train.bench.grid import parse_seeds
+    from abco_train.harness.trained_policy import load_policy, record_gif
 
     episodes = parse_seeds(args.episodes)
     policy = load_policy(args.run_dir, quiet=args.quiet)

@@ -32,8 +32,8 @@ from pathlib import Path
 
 import abco_data
 import abco_envs
-from abco_train.config import RunConfig
-from abco_train.train import train
+from abco_train.config.run import RunConfig
+from abco_train.harness.loop import train
 
 #: env -> (minimum train P, maximum seconds)
 TARGETS = {"AbcoMaze5x5-v0": (0.96, 600.0), "CartPole-v1": (1.0, 60.0)}

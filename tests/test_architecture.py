@@ -1,10 +1,12 @@
 """The shape of the code: layers envs -> data -> train, no import cycles, no private names
-imported across modules. Read from the source with ``ast``: imports inside functions count;
-imports under ``if TYPE_CHECKING:`` (annotations only, never executed) do not."""
+imported across modules. Read from the source with ``ast``: every import counts, inside
+functions, under ``if TYPE_CHECKING:`` (a module that names another's types depends on it as
+much as one that calls it) and in docstring examples (doctests run as tests of the module)."""
 
 from __future__ import annotations
 
 import ast
+import doctest
 from pathlib import Path
 
 import pytest
@@ -35,40 +37,77 @@ def _resolve(target: str) -> str | None:
     return target or None
 
 
-def _imports(module: str) -> list[tuple[str, str | None]]:
-    """(imported project module, imported name or None) for every import in ``module``."""
-    tree = ast.parse(MODULES[module].read_text())
-    is_package = MODULES[module].name == "__init__.py"
-    out: list[tuple[str, str | None]] = []
-    for block in [n for n in ast.walk(tree) if isinstance(n, ast.If)]:
-        test = block.test
-        if isinstance(test, ast.Name) and test.id == "TYPE_CHECKING" or \
-                isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING":
-            block.body = []
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            out += [(m, None) for a in node.names if (m := _resolve(a.name))]
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                anchor = module.split(".")
-                anchor = anchor if is_package else anchor[:-1]
-                anchor = anchor[: len(anchor) - node.level + 1]
-                base = ".".join([*anchor, base] if base else anchor)
-            for alias in node.names:
-                sub = _resolve(f"{base}.{alias.name}")
-                if sub is not None and sub == f"{base}.{alias.name}":
-                    out.append((sub, None))  # ``from pkg import module``
-                elif (m := _resolve(base)) is not None:
-                    out.append((m, alias.name))
+def _import_nodes(tree: ast.AST) -> list[ast.Import | ast.ImportFrom]:
+    """Every import statement of ``tree``, at any depth (``if TYPE_CHECKING:`` blocks too)."""
+    return [n for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom))]
+
+
+def _doctest_imports(tree: ast.Module) -> list[ast.Import | ast.ImportFrom]:
+    """The import statements of the examples in every docstring of ``tree``."""
+    parser = doctest.DocTestParser()
+    out: list[ast.Import | ast.ImportFrom] = []
+    for node in [tree, *ast.walk(tree)]:
+        if not isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef,
+                                 ast.AsyncFunctionDef)):
+            continue
+        docstring = ast.get_docstring(node, clean=False)
+        for example in parser.get_examples(docstring or ""):
+            out += _import_nodes(ast.parse(example.source))
     return out
 
 
-GRAPH = {m: sorted({t for t, _ in _imports(m) if t != m}) for m in MODULES}
+def _targets(module: str, nodes: list[ast.Import | ast.ImportFrom]
+             ) -> list[tuple[str, str | None]]:
+    """(imported project module, imported name or None) for each import of ``module``."""
+    is_package = MODULES[module].name == "__init__.py"
+    out: list[tuple[str, str | None]] = []
+    for node in nodes:
+        if isinstance(node, ast.Import):
+            out += [(m, None) for a in node.names if (m := _resolve(a.name))]
+            continue
+        base = node.module or ""
+        if node.level:
+            anchor = module.split(".")
+            anchor = anchor if is_package else anchor[:-1]
+            anchor = anchor[: len(anchor) - node.level + 1]
+            base = ".".join([*anchor, base] if base else anchor)
+        for alias in node.names:
+            sub = _resolve(f"{base}.{alias.name}")
+            if sub is not None and sub == f"{base}.{alias.name}":
+                out.append((sub, None))  # ``from pkg import module``
+            elif (m := _resolve(base)) is not None:
+                out.append((m, alias.name))
+    return out
+
+
+def _imports(module: str) -> list[tuple[str, str | None]]:
+    """(imported project module, imported name or None) for every import in ``module``'s code."""
+    return _targets(module, _import_nodes(ast.parse(MODULES[module].read_text())))
+
+
+def _example_imports(module: str) -> list[str]:
+    """The project modules (packages included) that ``module``'s docstring examples import."""
+    tree = ast.parse(MODULES[module].read_text())
+    return [t for t, _ in _targets(module, _doctest_imports(tree))]
+
+
+def _is_package(module: str) -> bool:
+    return MODULES[module].name == "__init__.py"
+
+
+#: Module -> the project modules it depends on: its code's imports and its examples'.
+DEPENDS = {m: sorted(({t for t, _ in _imports(m)} | {*_example_imports(m)}) - {m})
+           for m in MODULES}
+#: The graph that must have no cycle: every import of the code, and the examples' imports of
+#: modules. An example importing a package (``import abco_data``) uses it as a user does, once
+#: the package is whole, so that is no edge here (it still counts for the layers).
+GRAPH = {m: sorted(({t for t, _ in _imports(m)}
+                    | {t for t in _example_imports(m) if not _is_package(t)}) - {m})
+         for m in MODULES}
 
 
 def test_layers_point_one_way() -> None:
-    upward = [f"{m} -> {t}" for m, targets in GRAPH.items() for t in targets
+    upward = [f"{m} -> {t}" for m, targets in DEPENDS.items() for t in targets
               if LAYER[t.split(".")[0]] > LAYER[m.split(".")[0]]]  # fmt: skip
     assert upward == []
 

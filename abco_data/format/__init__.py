@@ -27,6 +27,7 @@ from abco_data.format.reader import (
     HDF5_ERRORS,
     LazyH5File,
     ObservationReader,
+    h5_column,
     hdf5_errors,
     open_h5,
     open_h5_file,
@@ -77,7 +78,8 @@ __all__ = [
     "POSITIONS", "REFERENCE_COLUMNS", "REQUIRED_ROOT_ATTRS", "REWARDS", "TERMINATIONS",
     "TRUNCATIONS", "VECTOR_CHUNK_BYTES", "HDF5_ERRORS", "DatasetWriter", "LazyH5File",
     "ObservationReader", "action_column", "attr_value", "check_global_heaps", "check_header",
-    "chunk_rows", "episode_column", "expected_rows", "hdf5_errors", "open_h5", "open_h5_file",
+    "chunk_rows", "episode_column", "expected_rows", "h5_column", "hdf5_errors", "open_h5",
+    "open_h5_file",
     "read_column", "read_rows", "required_columns",
     "space_from_json", "space_to_json", "to_json",
 ]

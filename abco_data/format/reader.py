@@ -29,8 +29,8 @@ from abco_data.format.heaps import check_global_heaps
 from abco_data.format.schema import OBSERVATION_ENCODINGS, OBSERVATIONS, PALETTE, attr_value
 from abco_data.palette import MAX_COLOURS, PaletteDecoder
 
-__all__ = ["HDF5_ERRORS", "open_h5", "open_h5_file", "hdf5_errors", "read_column",
-           "read_rows", "ObservationReader", "LazyH5File"]
+__all__ = ["HDF5_ERRORS", "open_h5", "open_h5_file", "hdf5_errors", "h5_column",
+           "read_column", "read_rows", "ObservationReader", "LazyH5File"]
 
 #: What h5py raises for a damaged file: ``OSError`` (unreadable data), ``RuntimeError``
 #: (inconsistent metadata) and ``KeyError`` (an object that cannot be opened).
@@ -56,6 +56,20 @@ def hdf5_errors(path: str | os.PathLike[str], what: str = "data") -> Iterator[No
         detail = str(err.args[0]) if isinstance(err, KeyError) and err.args else str(err)
         raise CorruptDatasetError(f"{path}: {what} cannot be read (corrupt or truncated"
                                   f" file): {detail}") from err
+
+
+def h5_column(f: h5py.Group, name: str) -> h5py.Dataset:
+    """``f[name]``, checked to be an HDF5 dataset (a column), not a group or a named type.
+
+    Raises:
+        KeyError: No object ``name`` (h5py's own; :func:`hdf5_errors` reports it).
+        CorruptDatasetError: ``name`` is a group or a named type.
+    """
+    obj = f[name]
+    if not isinstance(obj, h5py.Dataset):
+        raise CorruptDatasetError(f"{f.file.filename}: {name} is an HDF5"
+                                  f" {type(obj).__name__}, not a column")
+    return obj
 
 
 def read_column(ds: h5py.Dataset, out: np.ndarray) -> None:
@@ -104,7 +118,7 @@ class ObservationReader:
 
     def __init__(self, f: h5py.File) -> None:
         self.path = f.filename
-        self.ds = f[OBSERVATIONS]
+        self.ds = h5_column(f, OBSERVATIONS)
         self.encoding = attr_value(f.attrs.get("observation_encoding", "raw"))
         self._palette: np.ndarray | None = None
         self._decoder: PaletteDecoder | None = None
@@ -113,7 +127,7 @@ class ObservationReader:
                 raise CorruptDatasetError(f"{f.filename}: observation_encoding is"
                                           f" {self.encoding!r} but the {PALETTE} dataset is"
                                           " missing")
-            palette = f[PALETTE][()]
+            palette = h5_column(f, PALETTE)[()]
             if (palette.dtype != np.uint8 or palette.ndim != 2 or palette.shape[1] != 3
                     or len(palette) > MAX_COLOURS or self.ds.dtype != np.uint8
                     or len(np.unique(palette, axis=0)) != len(palette)):  # a colour twice
@@ -130,9 +144,10 @@ class ObservationReader:
             shape = (*shape[:-1], 2 * shape[-1])
         self.shape = shape if self._palette is None else (*shape, 3)
         self.dtype = np.dtype(np.uint8) if self._palette is not None else self.ds.dtype
-        self._raw_chunks = self._palette is not None and _deflated_row_chunks(self.ds)
         # The chunk shape, read once (h5py's properties cost microseconds a call).
-        self._chunk: tuple[int, ...] = self.ds.chunks if self._raw_chunks else ()
+        chunks = self.ds.chunks if self._palette is not None else None
+        self._raw_chunks = chunks is not None and _deflated_row_chunks(self.ds)
+        self._chunk: tuple[int, ...] = chunks if chunks is not None and self._raw_chunks else ()
 
     @property
     def decoder(self) -> PaletteDecoder | None:
@@ -162,25 +177,27 @@ class ObservationReader:
             return self._read(start, stop, out)
 
     def _read(self, start: int, stop: int, out: np.ndarray) -> np.ndarray:
-        if self.decoder is None:
+        decoder = self.decoder
+        if decoder is None:
             self.ds.read_direct(out, np.s_[start:stop], np.s_[0 : stop - start])
             self._check_finite(out, start)
             return out
         if not self._raw_chunks:
-            self._read_decoded(start, stop, out)
+            self._read_decoded(decoder, start, stop, out)
             return out
         # Whole chunks inflated here, partial ones at the ends through HDF5 (and its cache).
         n = self._chunk[0]
         first = min(-(-start // n) * n, stop)
         last = stop if stop == len(self) else max(first, stop // n * n)
-        self._read_decoded(start, first, out[: first - start])
+        self._read_decoded(decoder, start, first, out[: first - start])
         for a in range(first, last, n):
             b = min(a + n, last)
-            self._chunk_decoded(a // n, out[a - start : b - start])
-        self._read_decoded(last, stop, out[last - start :])
+            self._chunk_decoded(decoder, a // n, out[a - start : b - start])
+        self._read_decoded(decoder, last, stop, out[last - start :])
         return out
 
-    def _read_decoded(self, start: int, stop: int, out: np.ndarray) -> None:
+    def _read_decoded(self, decoder: PaletteDecoder, start: int, stop: int,
+                      out: np.ndarray) -> None:
         """Rows ``start:stop`` read through HDF5, checked and decoded into ``out``.
 
         A few chunks at a time into one small buffer, decoded straight into ``out``: the only
@@ -193,10 +210,10 @@ class ObservationReader:
         for a in range(start, stop, step):
             b = min(a + step, stop)
             self.ds.read_direct(buf, np.s_[a:b], np.s_[0 : b - a])
-            self._check_indices(buf[: b - a], a)
-            self.decoder.decode_into(buf[: b - a], out[a - start : b - start])
+            self._check_indices(decoder, buf[: b - a], a)
+            decoder.decode_into(buf[: b - a], out[a - start : b - start])
 
-    def _chunk_decoded(self, c: int, out: np.ndarray) -> None:
+    def _chunk_decoded(self, decoder: PaletteDecoder, c: int, out: np.ndarray) -> None:
         """The first ``len(out)`` rows of chunk ``c``, inflated here with zlib, checked and
         decoded.
 
@@ -214,23 +231,25 @@ class ObservationReader:
         except (RuntimeError, zlib.error):
             pass
         if len(data) != size:
-            self._read_decoded(c * n, c * n + len(out), out)
+            self._read_decoded(decoder, c * n, c * n + len(out), out)
             return
         stored = np.frombuffer(data, dtype=np.uint8).reshape(self._chunk)[: len(out)]
-        self._check_indices(stored, c * n)
-        self.decoder.decode_into(stored, out)
+        self._check_indices(decoder, stored, c * n)
+        decoder.decode_into(stored, out)
 
     def rows(self, rows: np.ndarray) -> np.ndarray:
         """Rows ``rows`` (any order, repeats allowed) decoded; see :func:`read_rows`."""
         with hdf5_errors(self.path, "observations"):
             block = read_rows(self.ds, rows)
-        if self.decoder is None:
+        decoder = self.decoder
+        if decoder is None:
             self._check_finite(block, None)
             return block
-        self._check_indices(block, None)
-        return self.decoder.decode(block)
+        self._check_indices(decoder, block, None)
+        return decoder.decode(block)
 
-    def _check_indices(self, stored: np.ndarray, start: int | None) -> None:
+    def _check_indices(self, decoder: PaletteDecoder, stored: np.ndarray,
+                       start: int | None) -> None:
         """Every palette index of ``stored`` names a palette entry.
 
         Two max-reductions over the nibbles (or one over the bytes): several times faster than
@@ -238,7 +257,7 @@ class ObservationReader:
         """
         if not stored.size:
             return
-        colours = len(self._palette)
+        colours = len(decoder.palette)
         if self.encoding == "palette4":
             top = max(int((stored & 15).max()), int((stored >> 4).max()))
         else:

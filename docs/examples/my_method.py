@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from abco_train.config import RunConfig
-from abco_train.data import TrainingData
+from abco_train.harness.training_data import TrainingData
 from abco_train.methods import Method, register
 
 

@@ -39,8 +39,8 @@ sys.path[:0] = [str(Path(__file__).resolve().parents[2]), str(Path(__file__).res
 from data_testing import make_small  # noqa: E402
 
 import abco_data  # noqa: E402
-from abco_data.child import run_in_child  # noqa: E402
 from abco_data.errors import DatasetError  # noqa: E402
+from abco_data.forked_call import run_in_child  # noqa: E402
 
 FAMILIES = ("flip", "truncate", "zero", "edit", "plausible")
 READERS = ("open", "load_arrays", "episodes", "torch", "check", "verify", "cli_verify")

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from test_bench_grid import tiny_overrides
 
-from abco_train import grid as bench
+from abco_train.bench import grid as bench
 from abco_train.cli import build_parser
 from abco_train.cli import main as abco_main
 

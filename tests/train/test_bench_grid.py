@@ -10,10 +10,10 @@ from typing import Any
 import pytest
 
 import abco_data
-from abco_train import grid as bench
-from abco_train import paper
+from abco_train.bench import grid as bench
 from abco_train.cli import main as abco_main
-from abco_train.methods import INTERACTION_KINDS
+from abco_train.methods.base import INTERACTION_KINDS
+from abco_train.report import published as paper
 
 TINY_TRAINING = {"iterations": 1, "idm_epochs": 1, "policy_epochs": 1, "eval_episodes": 3}
 
@@ -49,8 +49,8 @@ CELLS = bench.plan(["CartPole-v1"], ["bco-alpha", "abco"], [0, 1])
 @pytest.fixture(scope="module")
 def grid(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """The tiny grid, run once; one cell was interrupted beforehand (checkpoint, no final)."""
-    from abco_train.config import RunConfig
-    from abco_train.train import train
+    from abco_train.config.run import RunConfig
+    from abco_train.harness.loop import train
 
     root = tmp_path_factory.mktemp("bench")
     overrides = tiny_overrides(root / "data")

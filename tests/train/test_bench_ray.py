@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from test_bench_grid import comparable_final, comparable_metrics, tiny_overrides
 
-from abco_train import grid as bench
+from abco_train.bench import grid as bench
 
 ray = pytest.importorskip("ray")
 

@@ -17,10 +17,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from abco_train import aggregate, report_grid
 from abco_train.cli import main as abco_main
-from abco_train.report import GOALS, TABLE1_ENVS, table_evaluation, write_report
-from abco_train.stats import iqm
+from abco_train.report import aggregates as aggregate
+from abco_train.report import runs as report_grid
+from abco_train.report.stats import iqm
+from abco_train.report.write import GOALS, TABLE1_ENVS, table_evaluation, write_report
 
 SEEDS = (0, 1, 2)
 

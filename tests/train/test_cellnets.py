@@ -1,4 +1,4 @@
-"""The maze networks for unseen layouts (:mod:`abco_train.cellnets`): the value-iteration
+"""The maze networks for unseen layouts (:mod:`abco_train.networks.cells`): the value-iteration
 planner of ``cellplan`` and what both cell networks promise (no weight tied to a position)."""
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ from gymnasium import spaces
 
 from abco_envs.maze.layout import distances_to, generate_layout
 from abco_envs.maze.rules import DELTAS, OPEN_BITS, goal_position
-from abco_train.cellnets import LOG_FLOOR, PlannedHead, ValuePlanner
-from abco_train.config import CELL_ARCHS, ConfigError, RunConfig
-from abco_train.nets import build_networks
+from abco_train.config.run import CELL_ARCHS, ConfigError, RunConfig
+from abco_train.networks.builders import build_networks
+from abco_train.networks.cells import LOG_FLOOR, PlannedHead, ValuePlanner
 
 FRAMES = spaces.Box(0, 255, (64, 64, 3), np.uint8)
 

@@ -1,4 +1,5 @@
-"""GAIfO (abco_train.gaifo): runs on every env, its discriminator, its counts, its seeding."""
+"""GAIfO (abco_train.methods.gaifo.method): runs on every env, its discriminator, its counts, its
+seeding."""
 
 from __future__ import annotations
 
@@ -11,15 +12,16 @@ import torch
 from train_testing import tiny_config
 
 import abco_envs
-from abco_train.config import ConfigError
-from abco_train.data import load_training_data
-from abco_train.methods import INTERACTION_KINDS, get_method, resolve_config
-from abco_train.policy import load_policy
-from abco_train.train import seed_everything, train
+from abco_train.config.run import ConfigError
+from abco_train.harness.loop import seed_everything, train
+from abco_train.harness.trained_policy import load_policy
+from abco_train.harness.training_data import load_training_data
+from abco_train.methods.base import INTERACTION_KINDS
+from abco_train.methods.registry import get_method, resolve_config
 
 pytest.importorskip("stable_baselines3")
 
-from abco_train.gaifo import (  # noqa: E402
+from abco_train.methods.gaifo.method import (  # noqa: E402
     EXPERT_LABEL,
     LEARNER_LABEL,
     REWARDS,

@@ -23,17 +23,17 @@ from abco_data.registry import PROCEDURAL_ENVS
 from abco_envs.maze.layout import layout_hash
 from abco_envs.maze.render import MazeRenderer
 from abco_envs.maze.rules import OPEN_E, OPEN_N, OPEN_S, OPEN_W
-from abco_train import config as config_module
-from abco_train import grid as bench
-from abco_train.abco import TRANSPOSED_ACTIONS, _fit, transpose_batch
-from abco_train.cellnets import CellReadout, cell_centres
+from abco_train.bench import grid as bench
 from abco_train.cli import main as abco_main
-from abco_train.config import ConfigError, RunConfig
-from abco_train.data import TRAIN_EVAL_LAYOUTS, load_training_data
-from abco_train.policy import load_policy
-from abco_train.report import write_report
-from abco_train.report_grid import load_runs
-from abco_train.train import FRESH_SEED, train
+from abco_train.config import run as config_module
+from abco_train.config.run import ConfigError, RunConfig
+from abco_train.harness.loop import FRESH_SEED, train
+from abco_train.harness.trained_policy import load_policy
+from abco_train.harness.training_data import TRAIN_EVAL_LAYOUTS, load_training_data
+from abco_train.methods.bco.family import TRANSPOSED_ACTIONS, _fit, transpose_batch
+from abco_train.networks.cells import CellReadout, cell_centres
+from abco_train.report.runs import load_runs
+from abco_train.report.write import write_report
 
 LAYOUTS = 8
 ENV = "AbcoMaze5x5-v0"
@@ -185,7 +185,7 @@ def test_fresh_evaluation_keys_and_determinism(procedural, tmp_path) -> None:
 
 def test_fresh_layouts_are_the_same_for_every_run(procedural, tmp_path) -> None:
     """Two seeds and two methods roll out on the same fresh layouts (their ids)."""
-    from abco_train.evaluate import rollout
+    from abco_train.harness.rollouts import rollout
 
     cells = abco_envs.fresh_layouts(5, 3, FRESH_SEED)
     roll = rollout(lambda obs: np.zeros(len(obs), np.int64), ENV, layouts=cells, seed=5)
@@ -412,7 +412,7 @@ def test_generalisation_plot_keeps_one_colour_per_method_across_envs(tmp_path, m
     """A maze that has only some methods' runs draws them in the colours of the other rows."""
     import matplotlib.pyplot as plt
 
-    from abco_train.report_plots import plot_generalisation
+    from abco_train.report.plots import plot_generalisation
 
     class Runs:
         def __init__(self, success: float) -> None:

@@ -11,17 +11,18 @@ import torch
 from train_testing import tiny_config
 
 import abco_envs
-from abco_train.config import ConfigError
-from abco_train.data import load_training_data
-from abco_train.ilpo import (
+from abco_train.config.run import ConfigError
+from abco_train.harness.loop import seed_everything, train
+from abco_train.harness.training_data import load_training_data
+from abco_train.methods.base import INTERACTION_KINDS
+from abco_train.methods.ilpo.method import (
     ILPO,
     CellAverage,
     ImageForwardModel,
     expected_prediction_loss,
     min_over_latents_loss,
 )
-from abco_train.methods import INTERACTION_KINDS, available, resolve_config
-from abco_train.train import seed_everything, train
+from abco_train.methods.registry import available, resolve_config
 
 ENVS = (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
 #: A tiny budget: a few gradient steps, a few remapping steps.

@@ -10,10 +10,11 @@ import torch
 from train_testing import tiny_config
 
 import abco_envs
-from abco_train.data import load_training_data
-from abco_train.iupe import IUPE
-from abco_train.methods import INTERACTION_KINDS, Method, resolve_config
-from abco_train.train import seed_everything, train
+from abco_train.harness.loop import seed_everything, train
+from abco_train.harness.training_data import load_training_data
+from abco_train.methods.base import INTERACTION_KINDS, Method
+from abco_train.methods.iupe import IUPE
+from abco_train.methods.registry import resolve_config
 
 ENVS = (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
 

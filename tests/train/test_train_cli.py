@@ -16,8 +16,8 @@ from train_testing import tiny_config
 
 import abco_train
 from abco_train.cli import build_parser, main
-from abco_train.config import ConfigError, RunConfig
-from abco_train.train import train
+from abco_train.config.run import ConfigError, RunConfig
+from abco_train.harness.loop import train
 
 
 def _train_args(tiny_data, env: str, run_dir: Path, *extra: str) -> list[str]:

@@ -10,12 +10,13 @@ import pytest
 from train_testing import tiny_config
 
 import abco_data
-from abco_train import abco as abco_module
-from abco_train import grid, report
+from abco_train.bench import grid
 from abco_train.cli import main
-from abco_train.config import RunConfig
-from abco_train.nets import build_networks
-from abco_train.train import train
+from abco_train.config.run import RunConfig
+from abco_train.harness.loop import train
+from abco_train.methods.bco import family as abco_module
+from abco_train.networks.builders import build_networks
+from abco_train.report import write as report
 
 
 def _metrics(run_dir) -> list[dict]:

@@ -10,9 +10,9 @@ import pytest
 from train_testing import tiny_config
 
 import abco_envs
-from abco_train.abco import VARIANTS
-from abco_train.evaluate import rollout, score
-from abco_train.train import train
+from abco_train.harness.loop import train
+from abco_train.harness.rollouts import rollout, score
+from abco_train.methods.bco.family import VARIANTS
 
 ENVS = (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
 

@@ -9,14 +9,14 @@ import pytest
 import torch
 from gymnasium import spaces
 
-from abco_train.metrics import performance, summarize
-from abco_train.nets import FeatureSelfAttention, SelfAttention2d, build_networks
-from abco_train.sampling import (
+from abco_train.harness.metrics import performance, summarize
+from abco_train.methods.bco.sampling import (
     draw_by_class,
     largest_remainder,
     run_action_distribution,
     sample_training_set,
 )
+from abco_train.networks.builders import FeatureSelfAttention, SelfAttention2d, build_networks
 
 # -- attention ---------------------------------------------------------------------------------
 
@@ -207,7 +207,7 @@ def test_performance_on_hand_made_returns():
 
 def test_other_datasets_make_another_run(tmp_path):
     """A finished run asked for with other pre-demonstrations is not handed back as a result."""
-    from abco_train.run_folder import config_differences, finished_result
+    from abco_train.harness.run_folder import config_differences, finished_result
 
     (tmp_path / "config.json").write_text(json.dumps({"env": "Acrobot-v1", "pre_data": None}))
     (tmp_path / "final.json").write_text(json.dumps({"status": "ok"}))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import abco_data
 import abco_envs
-from abco_train.config import RunConfig
+from abco_train.config.run import RunConfig
 
 TINY = {
     "maze_expert": {"layouts": 2, "solutions_per_layout": 1, "reference_episodes": 2},

@@ -1,0 +1,1 @@
+"""``abco bench``: a grid of (env, method, seed) runs, its results log, where cells run."""

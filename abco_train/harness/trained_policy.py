@@ -1,0 +1,162 @@
+"""A trained policy from a run folder, and an animation of it acting.
+
+:func:`load_policy` rebuilds the run's method from ``config.json`` and ``checkpoint.pt`` (on
+CPU, whatever device trained it) and returns a :class:`Policy`: observations in, greedy
+actions out. Its :meth:`Policy.evaluate` repeats the run's final evaluation, and gives the
+numbers of ``final.json`` back exactly. :func:`record_gif` rolls it out on chosen layouts (or
+reset seeds) and writes an animated GIF (``abco play``).
+
+Example (a run folder made by ``abco train``)::
+
+    policy = load_policy("runs/AbcoMaze5x5-v0-abco-s0")
+    obs, _ = gymnasium.make("AbcoMaze5x5-v0").reset(seed=0)
+    action = policy(obs)                  # one observation -> one int
+    actions = policy(np.stack([obs] * 8))  # a batch -> (8,) actions
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from abco_train.config.run import RunConfig, env_kind
+from abco_train.harness.loop import (
+    final_evaluation,
+    load_checkpoint,
+    resolve_device,
+    seed_everything,
+)
+from abco_train.harness.run_folder import CHECKPOINT, CONFIG, RunFolderError, read_json
+from abco_train.harness.training_data import TrainingData, load_training_data
+from abco_train.methods.base import Method
+from abco_train.methods.registry import get_method
+
+__all__ = ["Policy", "load_policy", "record_gif"]
+
+
+@dataclass
+class Policy:
+    """A trained method's greedy policy.
+
+    Attributes:
+        config: The run's resolved config.
+        method: The method, restored from the checkpoint.
+        data: The run's training data (the datasets are read from the cache, or generated).
+        iteration: The checkpoint's iteration (the last one for a finished run).
+    """
+
+    config: RunConfig
+    method: Method
+    data: TrainingData
+    iteration: int
+
+    @property
+    def observation_space(self) -> Any:
+        """The observations the policy takes."""
+        return self.data.observation_space
+
+    def __call__(self, obs: np.ndarray) -> Any:
+        """Greedy action(s): one observation -> an ``int``; a batch -> an ``(B,)`` array."""
+        obs = np.asarray(obs)
+        single = obs.shape == tuple(self.observation_space.shape)
+        actions = self.act(obs[None] if single else obs)
+        return int(actions[0]) if single else actions
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Greedy actions for a batch of observations."""
+        return np.asarray(self.method.act(obs)).reshape(-1)
+
+    def evaluate(self) -> dict[str, Any]:
+        """The run's final evaluation again (same episodes, same seeds; no plots)."""
+        cfg = self.config.replace(plots=False)
+        return final_evaluation(cfg, self.data, self.method, [], Path(cfg.run_dir or "."))
+
+
+def load_policy(run_dir: str | os.PathLike[str], *, device: str = "cpu", quiet: bool = True
+                ) -> Policy:  # fmt: skip
+    """The trained policy of a run folder (on CPU unless asked, wherever it trained).
+
+    Args:
+        run_dir: A folder written by ``abco train`` (or a cell of ``abco bench``).
+        device: Where the policy acts: ``cpu``, ``cuda`` or ``auto``.
+        quiet: No progress bars while the datasets are read.
+
+    Raises:
+        RunFolderError: No run there, or its files are damaged.
+    """
+    run_dir = Path(run_dir)
+    if not (run_dir / CONFIG).exists() or not (run_dir / CHECKPOINT).exists():
+        raise RunFolderError(f"{run_dir} holds no trained run ({CONFIG} and {CHECKPOINT})")
+    values = read_json(run_dir / CONFIG)
+    known = {f.name for f in fields(RunConfig)}
+    cfg = RunConfig(**{k: v for k, v in values.items() if k in known})
+    cfg = cfg.replace(run_dir=str(run_dir), quiet=quiet, device=resolve_device(device))
+    state = load_checkpoint(run_dir / CHECKPOINT, cfg.device)
+    rng = seed_everything(cfg.seed, cfg.threads, cfg.deterministic)
+    data = load_training_data(cfg)
+    method = get_method(cfg.method)(cfg, data, rng)
+    method.load_state_dict(state["method"])
+    method.interactions.update(state.get("interactions", {}))
+    return Policy(cfg, method, data, int(state["iteration"]))
+
+
+def _upscale(frame: np.ndarray, min_side: int = 256) -> np.ndarray:
+    k = max(1, -(-min_side // min(frame.shape[:2])))
+    return np.repeat(np.repeat(frame, k, axis=0), k, axis=1)
+
+
+def record_gif(
+    policy: Policy,
+    path: str | os.PathLike[str],
+    episodes: Sequence[int] = (0,),
+    *,
+    split: str = "train",
+    max_steps: int = 200,
+    fps: int = 8,
+    progress: bool = True,
+) -> Path:
+    """Roll ``policy`` out and write the episodes, one after another, as an animated GIF.
+
+    Args:
+        policy: From :func:`load_policy`.
+        path: The ``.gif`` to write.
+        episodes: Mazes: layout indices of ``split``; classic control: reset seeds.
+        split: Maze split, ``train`` or ``test``.
+        max_steps: Cap on each episode's length.
+        fps: Frames per second.
+        progress: A progress bar over the episodes.
+
+    Returns:
+        The path written.
+    """
+    import gymnasium as gym
+    from PIL import Image
+    from tqdm.auto import tqdm
+
+    cfg, maze = policy.config, env_kind(policy.config.env) == "maze"
+    kwargs = {**policy.data.env_kwargs, **({"split": split} if maze else {})}
+    env = gym.make(cfg.env, render_mode=None if maze else "rgb_array", **kwargs)
+    frames: list[np.ndarray] = []
+    for episode in tqdm(list(episodes), desc="episodes", disable=not progress, unit="ep"):
+        options = {"layout_index": int(episode), "start": (0, 0)} if maze else None
+        obs, _ = env.reset(seed=int(episode), options=options)
+        shot = (lambda o: o) if maze else (lambda o: env.render())
+        frames.append(_upscale(shot(obs)))
+        for _ in range(max_steps):
+            obs, _, terminated, truncated, _ = env.step(policy(obs))
+            frames.append(_upscale(shot(obs)))
+            if terminated or truncated:
+                break
+        frames += [frames[-1]] * max(1, fps // 2)  # a short pause between episodes
+    env.close()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    images = [Image.fromarray(f) for f in frames]
+    images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / fps),
+                   loop=0)  # fmt: skip
+    return path

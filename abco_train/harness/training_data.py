@@ -1,0 +1,182 @@
+"""A run's training data: its two datasets resolved, checked, loaded and subsampled.
+
+:func:`resolve_dataset` is the one place that turns ``--expert-data`` / ``--pre-data`` (a
+file, a dataset id, or nothing for the env's own dataset) into an open
+:class:`abco_data.Dataset`; the trainer and ``abco bench`` both use it.
+:class:`TrainingData` is what a :class:`~abco_train.methods.base.Method` receives: numpy arrays,
+no torch.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import abco_data
+import abco_envs
+from abco_train.config.run import ConfigError, RunConfig
+
+__all__ = ["TrainingData", "resolve_dataset", "load_training_data", "distinct_layouts",
+           "KINDS", "TRAIN_EVAL_LAYOUTS"]  # fmt: skip
+
+#: Dataset kinds of a run, by the role they play.
+KINDS = {"expert": "expert", "pre": "pre_demonstrations"}
+#: A run on the first K layouts (``--layouts``) is evaluated on its training layouts (the
+#: ``train`` evaluation, whose rollouts are also ABCO's post-demonstrations) on the first
+#: ``min(K, TRAIN_EVAL_LAYOUTS)`` of them: as many as the pool's train split has.
+TRAIN_EVAL_LAYOUTS = 100
+
+
+def resolve_dataset(
+    ref: str | None,
+    env_id: str,
+    kind: str,
+    *,
+    cache_dir: str | None = None,
+    progress: bool = False,
+    cached_only: bool = False,
+) -> abco_data.Dataset:
+    """A run's dataset: the file ``ref``, the dataset id ``ref``, or the env's own dataset.
+
+    Args:
+        ref: A path to an HDF5 file, a dataset id, or ``None`` (the env's ``kind`` dataset).
+        env_id: The run's environment.
+        kind: ``"expert"`` or ``"pre_demonstrations"``.
+        cache_dir: abco dataset cache (default ``$ABCO_DATA_HOME``).
+        progress: Show download/generation progress.
+        cached_only: Never fetch or generate: read the cache only (raises if missing).
+
+    Raises:
+        abco_data.DatasetError: The file or id is unusable (missing, damaged, another kind or
+            environment, a checksum mismatch, non-finite values); the message names it.
+    """
+    if ref is not None and Path(ref).is_file():
+        # A file given by hand is checked like one from the cache, before any training: its
+        # kind, environment, format version, checksum (when its id is known) and values.
+        return abco_data.check_dataset(ref, kind=kind, env_id=env_id)
+    dataset_id = ref or abco_data.dataset_id(env_id, kind)
+    if cached_only:
+        home = Path(cache_dir) if cache_dir else abco_data.data_home()
+        return abco_data.open_dataset(home / abco_data.spec(dataset_id).filename)
+    wanted = abco_data.spec(dataset_id)  # an id names its kind and env: check before fetching
+    if wanted.kind != kind or abco_envs.env_name(wanted.env_id) != abco_envs.env_name(env_id):
+        raise abco_data.WrongKindError(
+            f"{dataset_id} holds {wanted.kind} of {wanted.env_id}; this run needs {kind} of "
+            f"{env_id}")  # fmt: skip
+    # Loaded files are checked against the manifest's sha256 (or regenerated) by ``load``.
+    return abco_data.load(dataset_id, cache_dir=cache_dir, progress=progress)
+
+
+@dataclass(frozen=True)
+class TrainingData:
+    """The datasets of a run, in memory, as numpy arrays.
+
+    Attributes:
+        env_id: The environment.
+        env_kwargs: Arguments the datasets were recorded with (mazes: ``obs_type``,
+            ``image_size``); evaluation uses the same.
+        observation_space: The datasets' observation space.
+        n_actions: Size of the discrete action space.
+        reference: Expert and random reference returns (per layout for mazes).
+        pre_obs: Pre-demonstration observations, every episode's ``T + 1`` rows.
+        pre_t: Row of ``s_t`` of each pre-demonstration transition (``s_t+1`` is the next).
+        pre_actions: The true action of each pre-demonstration transition.
+        expert_obs: Expert observations, every episode's ``T + 1`` rows.
+        expert_t: Row of ``s_t`` of each expert transition.
+        expert_eval_actions: The expert's true actions: for measuring IDM accuracy (and for
+            ``bc``, the supervised reference) only, never as labels of an IfO method.
+        layouts: Mazes with ``--layouts``: K, the number of layouts trained on; else ``None``.
+        train_layouts: Mazes with ``--layouts``: the ``(k, n, n)`` layouts of the ``train``
+            evaluation (the first ``min(K, TRAIN_EVAL_LAYOUTS)`` training layouts, whose
+            references ``reference`` then includes); ``None``: the pool's train split.
+    """
+
+    env_id: str
+    env_kwargs: dict[str, Any]
+    observation_space: Any
+    n_actions: int
+    reference: abco_data.ReferenceReturns
+    pre_obs: np.ndarray
+    pre_t: np.ndarray
+    pre_actions: np.ndarray
+    expert_obs: np.ndarray
+    expert_t: np.ndarray
+    expert_eval_actions: np.ndarray
+    layouts: int | None = None
+    train_layouts: np.ndarray | None = None
+
+    @property
+    def is_maze(self) -> bool:
+        """Whether the data comes from a maze (references per layout)."""
+        return self.reference.layout_ids is not None
+
+
+def _columns(dataset: abco_data.Dataset, episodes: int | None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, abco_data.DatasetArrays]:  # fmt: skip
+    """Observations, ``s_t`` rows and actions of a dataset's first ``episodes`` episodes (and
+    the arrays they come from)."""
+    arrays = dataset.load_arrays()
+    obs_t, _ = dataset.transition_index()
+    actions = dataset.actions_of_transitions(idm_eval=True)
+    if episodes is not None:
+        n = int(arrays.episode_lengths[:episodes].sum())
+        obs_t, actions = obs_t[:n], actions[:n]
+    return arrays.observations, obs_t, actions, arrays
+
+
+def _first_layouts(dataset: abco_data.Dataset, k: int, flag: str) -> abco_data.Dataset:
+    """The view of ``dataset``'s first ``k`` layouts, or a ConfigError naming ``flag``."""
+    try:
+        return dataset.first_layouts(k)
+    except (ValueError, abco_data.WrongKindError) as exc:
+        raise ConfigError(f"--layouts {k} with {flag} {dataset.id or dataset.path}: {exc}"
+                          ) from None  # fmt: skip
+
+
+def distinct_layouts(arrays: abco_data.DatasetArrays, count: int) -> np.ndarray:
+    """The first ``count`` distinct layouts of a maze dataset's episodes, in file order."""
+    if arrays.layouts is None or arrays.layout_indices is None:
+        raise ValueError("not a maze dataset: its episodes carry no layouts")
+    starts = np.flatnonzero(np.r_[True, arrays.layout_indices[1:] != arrays.layout_indices[:-1]])
+    return np.ascontiguousarray(arrays.layouts[starts[:count]])
+
+
+def load_training_data(config: RunConfig) -> TrainingData:
+    """Load (download or generate if needed) and subsample the run's two datasets.
+
+    With ``config.layouts`` (K), both datasets are cut to their first K layouts
+    (:meth:`abco_data.Dataset.first_layouts`), and the ``train`` evaluation moves to the
+    first ``min(K, TRAIN_EVAL_LAYOUTS)`` of them, their references computed by
+    :func:`abco_data.layout_reference` and added to the dataset's.
+
+    Raises:
+        ConfigError: K is more than a dataset's layouts, or a dataset is not a maze's.
+        abco_data.DatasetError: A dataset is unusable (see :func:`resolve_dataset`).
+    """
+    progress = not config.quiet
+    expert = resolve_dataset(config.expert_data, config.env, KINDS["expert"],
+                             cache_dir=config.cache_dir, progress=progress)  # fmt: skip
+    pre = resolve_dataset(config.pre_data, config.env, KINDS["pre"],
+                          cache_dir=config.cache_dir, progress=progress)  # fmt: skip
+    reference, train_layouts = expert.reference, None
+    if config.layouts is not None:
+        expert = _first_layouts(expert, config.layouts, "--expert-data")
+        pre = _first_layouts(pre, config.layouts, "--pre-data")
+    pre_obs, pre_t, pre_actions, _ = _columns(pre, None)
+    if config.pre_transitions is not None:
+        pre_t, pre_actions = pre_t[: config.pre_transitions], pre_actions[: config.pre_transitions]
+    expert_obs, expert_t, expert_actions, arrays = _columns(expert, config.expert_episodes)
+    if config.layouts is not None:
+        train_layouts = distinct_layouts(arrays, min(config.layouts, TRAIN_EVAL_LAYOUTS))
+        reference = reference.extended(abco_data.layout_reference(train_layouts, "training"))
+    return TrainingData(
+        env_id=config.env, env_kwargs=json.loads(expert.attrs.get("env_kwargs", "{}") or "{}"),
+        observation_space=expert.observation_space, n_actions=int(expert.action_space.n),
+        reference=reference, pre_obs=pre_obs, pre_t=pre_t, pre_actions=pre_actions,
+        expert_obs=expert_obs, expert_t=expert_t, expert_eval_actions=expert_actions,
+        layouts=config.layouts, train_layouts=train_layouts,
+    )  # fmt: skip

@@ -1,0 +1,495 @@
+"""ABCO(alpha) and its baselines in one file (Monteiro, Gavenski et al., IJCNN 2020).
+
+Algorithm 1 of the paper, top to bottom (:meth:`ABCO.train_iteration` then
+:meth:`ABCO.observe`, called by the harness in :mod:`abco_train.harness.loop` for ``i = 0..alpha``;
+the harness also owns seeding, the datasets and the run folder):
+
+1. ``I_s = I_pre`` (random-policy transitions with true actions).
+2. Train the IDM on ``I_s`` (cross-entropy, Adam); label every expert pair ``(s_t, s_t+1)``
+   with the IDM's argmax; train the policy on those labels (behavioural cloning).
+3. The harness runs the greedy policy on the evaluation episodes (mazes: every layout of the
+   train split); each run's ``(s_t, a_t, s_t+1)`` is a post-demonstration, ``v_e = 1`` if it
+   reached the goal.
+4. Re-sample ``I_s`` from ``I_pre`` and ``I_pos`` (:mod:`abco_train.methods.bco.sampling`).
+
+Choices where the paper is loose:
+
+* Sizes are **per class**: ``|I_s| = N`` (default ``|I_pre|``, capped by ``idm_samples``);
+  ``n_pos_c = round(N * w * q_c)`` with ``w = P(g|E)`` the latest win rate and ``q_c`` the
+  per-run average action distribution of the winning runs (Eq. 4 normalised);
+  ``n_pre_c = round(N * (1 - w) * p_c)`` with ``p_c`` the class shares of ``I_pre`` (Eq. 6);
+  largest-remainder rounding; uniform draws within a class, seeded.
+* ``I_pos`` **accumulates**: Algorithm 1 appends to it and never clears it, so the winning
+  runs of every iteration so far form the pool (their actions are the policy's own, hence
+  true labels of those transitions). The win rate ``w`` is that of the latest iteration only:
+  it measures the current policy.
+* Both networks are improved, not re-initialised, across iterations ("Improve M_theta").
+
+The IDM's health is measured, not assumed: a fixed held-out part of ``I_pre`` (true actions,
+:func:`validation_split`) gives its accuracy, overall and per class, after every epoch. Each
+time it trains it runs at most ``idm_epochs`` epochs, stops after ``idm_patience`` epochs
+without a better validation accuracy, and keeps its best weights. **Dead-IDM rule**: an IDM
+whose validation accuracy is below ``chance + DEAD_MARGIN`` after training (chance = the
+largest class share of the held-out actions; judged on at least ``MIN_JUDGED`` held-out
+transitions) predicts one class for everything, and every
+expert pair gets one label; it is re-initialised and trained again once, and if it is still
+at chance the run stops with :class:`~abco_train.methods.base.TrainingFailed` (status
+``idm_at_chance``) instead of ending with a normal-looking result.
+
+Budgets are equal across variants: a variant that runs one iteration (``bc``, ``bco``) trains
+its policy for as many epochs as the iterative ones do over all their iterations,
+``policy_epochs * (first_epochs_factor + iterations)``, so no baseline is behind on epochs.
+With ``min_updates`` (the ``general`` preset's), ``policy_epochs`` and ``idm_epochs`` are first
+raised on small data until one such unit makes at least that many minibatch updates (the
+first K layouts of the procedural datasets range from 850 to 84,000 expert transitions);
+with ``max_updates`` (the ``general`` preset's too) a policy unit makes at most that many, so
+every K trains its policy for the same number of updates (the IDM's set is ``idm_samples``
+for every K already).
+
+Variants (switches of one implementation, see :data:`VARIANTS`): ``bc`` (policy on the true
+expert actions), ``bco`` (BCO(0): IDM on ``I_pre`` once), ``bco-alpha`` (IDM re-trained on all
+post-demonstrations, the ABCO paper's reading of BCO(alpha)), ``bco-alpha-torabi`` (Torabi et
+al.'s BCO(alpha): ``I_pre`` plus every post-demonstration so far), ``abco`` (attention +
+partial sampling), and the ablations of Table 2:
+``attention`` (attention, BCO(alpha) data), ``sampling-partial`` and ``sampling-whole`` (no
+attention), ``abco-whole`` (attention + whole sampling).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+import abco_envs
+from abco_train.config.run import RunConfig, env_kind
+from abco_train.harness.rollouts import Rollouts
+from abco_train.harness.training_data import TrainingData
+from abco_train.methods.base import Method, TrainingFailed
+from abco_train.methods.bco.sampling import sample_training_set
+from abco_train.methods.registry import register
+from abco_train.networks.builders import build_networks
+
+__all__ = ["VARIANTS", "ABCO", "DEAD_MARGIN", "validation_split", "TRANSPOSED_ACTIONS",
+           "transpose_batch"]  # fmt: skip
+
+#: A maze transposed about its main diagonal ((row, col) -> (col, row); start and goal stay)
+#: turns each action into another: N <-> W, S <-> E (``abco_envs.Action`` order N, S, E, W).
+TRANSPOSED_ACTIONS = torch.tensor([3, 2, 1, 0])
+
+#: An IDM whose held-out accuracy is below ``chance + DEAD_MARGIN`` is at chance (dead).
+DEAD_MARGIN = 0.05
+#: Below this many held-out transitions the accuracy is logged but not judged: on a few dozen
+#: transitions (tiny test datasets) chance and a working IDM cannot be told apart.
+MIN_JUDGED = 200
+#: Held out of ``I_pre`` by default: 10% of it, at most this many transitions.
+VALIDATION_CAP = 2_000
+
+#: Method switches: (train the IDM, attention, how I_s is built after iteration 0).
+#: ``idm_data``: "pre" = I_pre only (BCO(0)), "pos" = all post-demonstrations (BCO(alpha)),
+#: "pre+pos" = I_pre and all post-demonstrations (Torabi et al.'s BCO(alpha)),
+#: "partial" / "whole" = ABCO's sampling from winning / all runs; ``None`` = no IDM (BC).
+VARIANTS: dict[str, dict[str, Any]] = {
+    "bc": {"attention": False, "idm_data": None, "iterative": False},
+    "bco": {"attention": False, "idm_data": "pre", "iterative": False},
+    "bco-alpha": {"attention": False, "idm_data": "pos", "iterative": True},
+    "bco-alpha-torabi": {"attention": False, "idm_data": "pre+pos", "iterative": True},
+    "abco": {"attention": True, "idm_data": "partial", "iterative": True},
+    "attention": {"attention": True, "idm_data": "pos", "iterative": True},
+    "sampling-partial": {"attention": False, "idm_data": "partial", "iterative": True},
+    "sampling-whole": {"attention": False, "idm_data": "whole", "iterative": True},
+    "abco-whole": {"attention": True, "idm_data": "whole", "iterative": True},
+}
+
+
+def transpose_batch(frames: list[torch.Tensor], labels: torch.Tensor, rng: np.random.Generator
+                    ) -> tuple[list[torch.Tensor], torch.Tensor]:  # fmt: skip
+    """Transpose each example of a minibatch with probability 1/2 (``--augment transpose``).
+
+    A chosen example's ``(B, H, W, C)`` frames (all of them: ``s`` and ``s'`` of a transition)
+    are transposed about the main diagonal and its action label mapped by
+    :data:`TRANSPOSED_ACTIONS`: a transposed maze, rendered, is the transposed frame, and its
+    start ``(0, 0)`` and goal ``(n-1, n-1)`` stay where they are.
+    """
+    flip = torch.from_numpy(rng.random(len(labels)) < 0.5)
+    if not flip.any():
+        return frames, labels
+    out = []
+    for x in frames:
+        x = x.clone()
+        x[flip] = x[flip].transpose(1, 2)
+        out.append(x)
+    labels = labels.clone()
+    labels[flip] = TRANSPOSED_ACTIONS[labels[flip]]
+    return out, labels
+
+
+def _fit(
+    net: torch.nn.Module,
+    opt: torch.optim.Optimizer,
+    inputs: Any,
+    labels: torch.Tensor,
+    epochs: int,
+    batch_size: int,
+    rng: np.random.Generator,
+    desc: str = "",
+    quiet: bool = True,
+    device: torch.device | None = None,
+    augment: bool = False,
+    max_batches: int | None = None,
+) -> float:
+    """Cross-entropy epochs over ``labels``; ``inputs(idx) -> args of net`` (CPU tensors,
+    moved batch by batch to ``device``); ``augment``: :func:`transpose_batch` on each
+    minibatch; ``max_batches``: stop after that many updates. Mean loss of the last epoch."""
+    from tqdm.auto import tqdm
+
+    net.train()
+    n, loss_sum, seen = len(labels), 0.0, 0
+    batches = -(-n // batch_size)
+    total = epochs * batches if max_batches is None else min(epochs * batches, max_batches)
+    bar = tqdm(total=total, desc=desc, leave=False, disable=quiet, unit="batch")
+    done = 0  # not bar.n: a disabled bar counts nothing
+    for _ in range(epochs):
+        order = torch.from_numpy(rng.permutation(n))
+        loss_sum, seen = 0.0, 0
+        for start in range(0, n, batch_size):
+            if done >= total:
+                break
+            bar.update(1)
+            done += 1
+            idx = order[start : start + batch_size]
+            batch, targets = list(inputs(idx)), labels[idx]
+            if augment:
+                batch, targets = transpose_batch(batch, targets, rng)
+            batch = [x.to(device, non_blocking=True) for x in batch]
+            loss = F.cross_entropy(net(*batch), targets.to(device, non_blocking=True))
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            loss_sum, seen = loss_sum + loss.item() * len(idx), seen + len(idx)
+    bar.close()
+    return loss_sum / max(seen, 1)
+
+
+@torch.no_grad()
+def _predict(net: torch.nn.Module, inputs: Any, n: int, batch_size: int = 512,
+             device: torch.device | None = None) -> torch.Tensor:  # fmt: skip
+    """Argmax predictions of ``net`` over ``n`` rows, in batches (on CPU)."""
+    net.eval()
+    out = [
+        net(*[x.to(device) for x in inputs(torch.arange(s, min(s + batch_size, n)))]).argmax(1)
+        .cpu() for s in range(0, n, batch_size)
+    ]  # fmt: skip
+    return torch.cat(out) if out else torch.zeros(0, dtype=torch.long)
+
+
+def validation_split(n: int, size: int | None, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(train, held-out)`` indices of ``n`` pre-demonstration transitions.
+
+    The held-out part has ``size`` transitions (default 10%, at most :data:`VALIDATION_CAP`),
+    drawn by a generator of its own, so the split is fixed by the seed and moves none of the
+    run's other draws.
+
+    Example:
+        >>> train, held = validation_split(100, None, seed=0)
+        >>> len(train), len(held), len(set(train) & set(held))
+        (90, 10, 0)
+    """
+    size = min(n - 1, size if size is not None else min(VALIDATION_CAP, max(1, n // 10)))
+    order = np.random.default_rng([seed, 0x1D]).permutation(n)
+    return np.sort(order[size:]), np.sort(order[:size])
+
+
+@register(*VARIANTS)
+class ABCO(Method):
+    """ABCO(alpha) with the switches of :data:`VARIANTS` (see the module docstring)."""
+
+    @classmethod
+    def variant(cls, name: str) -> dict[str, Any]:
+        """The switches of the method registered as ``name`` (a subclass may add its own)."""
+        return VARIANTS[name]
+
+    @classmethod
+    def defaults(cls, name: str) -> Mapping[str, Any]:
+        """The variant's attention switch (``--attention`` overrides it)."""
+        return {"attention": cls.variant(name)["attention"]}
+
+    def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
+        super().__init__(config, data, rng)
+        variant = self.variant(config.method)
+        self.idm_data, self.iterative = variant["idm_data"], variant["iterative"]
+        # -- networks (mean/std of the states standardise vector inputs) ----------------------
+        stats: dict[str, np.ndarray] = {}
+        if len(data.observation_space.shape) == 1:
+            states = data.pre_obs.astype(np.float64)
+            deltas = states[data.pre_t + 1] - states[data.pre_t]
+            stats = {"obs_mean": states.mean(0), "obs_std": states.std(0),
+                     "delta_mean": deltas.mean(0), "delta_std": deltas.std(0)}  # fmt: skip
+        if env_kind(config.env) == "maze":  # the cellnet reads the frame cell by cell
+            stats["grid"] = abco_envs.maze_size(config.env)
+        self.net_stats = stats
+        self.augment = config.augment == "transpose"
+        self.policy, self.idm = build_networks(
+            data.observation_space, data.n_actions, config.arch, bool(config.attention),
+            config.idm_input, **stats,
+        )
+        # Networks live on the run's device; the data stays in CPU memory and travels to the
+        # device one batch at a time (a maze's frames need not fit in GPU memory).
+        self.device = torch.device(config.device)
+        self.policy, self.idm = self.policy.to(self.device), self.idm.to(self.device)
+        self.policy_opt = torch.optim.Adam(self.policy.parameters(), lr=config.lr)
+        self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=config.lr)
+        # -- data as torch tensors (no copies) ------------------------------------------------
+        self.pre_obs = torch.from_numpy(data.pre_obs)
+        if self.idm_data is None:  # BC has no IDM to measure
+            keep, held = np.arange(len(data.pre_t)), np.zeros(0, dtype=np.int64)
+        else:
+            keep, held = validation_split(len(data.pre_t), config.idm_validation, config.seed)
+        self.pre_t = torch.from_numpy(data.pre_t[keep])
+        self.pre_actions = torch.from_numpy(data.pre_actions[keep])
+        if self.idm_data is not None:  # its IDM learns from (and is measured on) all of I_pre
+            self.count("pre_demonstration", len(data.pre_t))
+        self.val_t = torch.from_numpy(data.pre_t[held])
+        self.val_actions = torch.from_numpy(data.pre_actions[held])
+        shares = np.bincount(data.pre_actions[held], minlength=data.n_actions) / max(len(held), 1)
+        self.chance = float(shares.max())
+        self.expert_obs = torch.from_numpy(data.expert_obs)
+        self.expert_t = torch.from_numpy(data.expert_t)
+        # -- I_pos (accumulated post-demonstrations) and the current I_s ----------------------
+        self.pos_obs = torch.zeros((0, *data.pre_obs.shape[1:]), dtype=self.pre_obs.dtype)
+        self.pos_t = torch.zeros(0, dtype=torch.long)
+        self.pos_actions = torch.zeros(0, dtype=torch.long)
+        self.pos_runs = np.zeros(0, dtype=np.int64)
+        self.pos_wins = np.zeros(0, dtype=bool)
+        size = min(len(self.pre_t), config.idm_samples or len(self.pre_t))
+        self.s_pre = torch.from_numpy(rng.choice(len(self.pre_t), size, replace=False))
+        self.s_pos = torch.zeros(0, dtype=torch.long)
+        self.labels: np.ndarray | None = None
+
+    @property
+    def num_iterations(self) -> int:
+        """``alpha + 1`` for iterative variants, else 1."""
+        return int(self.config.iterations) + 1 if self.iterative else 1
+
+    # -- Algorithm 1, one iteration ---------------------------------------------------------
+
+    def train_iteration(self, iteration: int) -> dict[str, float]:
+        """Improve the IDM on ``I_s``, label the expert pairs, clone them into the policy."""
+        cfg, stats = self.config, {}
+        boost = cfg.first_epochs_factor if iteration == 0 else 1
+        # One-iteration variants get the iterative ones' whole policy budget (equal epochs).
+        units = boost if self.iterative else cfg.first_epochs_factor + cfg.iterations
+        policy_epochs, policy_updates = self._policy_budget(units)
+        expert_n = len(self.expert_t)
+        true = torch.from_numpy(self.data.expert_eval_actions)
+        if self.idm_data is None:  # BC: the supervised reference, true expert actions
+            labels = true
+        else:
+            if iteration == 0 or self.idm_data != "pre":
+                idm_epochs = self._floored(cfg.idm_epochs, len(self.s_pre) + len(self.s_pos))
+                stats.update(self._train_idm_checked(idm_epochs * boost, iteration))
+                stats["idm_samples"] = int(len(self.s_pre) + len(self.s_pos))
+            labels = _predict(self.idm, self._expert_pairs, expert_n, device=self.device)
+            stats["idm_expert_accuracy"] = float((labels == true).float().mean())
+        self.labels = labels.numpy()
+        stats["policy_loss"] = _fit(
+            self.policy, self.policy_opt, lambda idx: (self.expert_obs[self.expert_t[idx]],),
+            labels, policy_epochs, cfg.batch_size, self.rng, "policy", cfg.quiet, self.device,
+            self.augment, policy_updates,
+        )  # fmt: skip
+        stats["policy_epochs"] = policy_epochs
+        stats["policy_updates"] = policy_updates
+        predicted = _predict(self.policy, lambda idx: (self.expert_obs[self.expert_t[idx]],),
+                             expert_n, device=self.device)  # fmt: skip
+        stats["policy_label_accuracy"] = float((predicted == labels).float().mean())
+        return stats
+
+    def _policy_budget(self, units: int) -> tuple[int, int]:
+        """Epochs and minibatch updates of ``units`` policy units: ``policy_epochs`` each
+        (floored with ``min_updates``), a unit cut to ``max_updates`` updates where one makes
+        more (the last epoch then stops part-way)."""
+        per_epoch = -(-len(self.expert_t) // self.config.batch_size)
+        epochs = self._floored(self.config.policy_epochs, len(self.expert_t))
+        per_unit = epochs * per_epoch
+        if self.config.max_updates:
+            per_unit = min(per_unit, self.config.max_updates)
+        updates = units * per_unit
+        return -(-updates // max(per_epoch, 1)), updates
+
+    def _floored(self, epochs: int, examples: int) -> int:
+        """``epochs`` raised, with ``min_updates``, until they make that many minibatches."""
+        least = self.config.min_updates
+        if not least or not examples:
+            return epochs
+        per_epoch = -(-examples // self.config.batch_size)
+        return max(epochs, -(-least // per_epoch))
+
+    def _expert_pairs(self, idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        rows = self.expert_t[idx]
+        return self.expert_obs[rows], self.expert_obs[rows + 1]
+
+    # -- the IDM: early stopping on held-out pre-demonstrations, and the dead-IDM rule ------
+
+    @torch.no_grad()
+    def validate_idm(self) -> dict[str, Any]:
+        """Accuracy of the IDM on the held-out pre-demonstrations, overall and per class."""
+        if len(self.val_t) == 0:
+            return {"accuracy": float("nan"), "class_accuracy": []}
+        pred = _predict(self.idm, lambda idx: (self.pre_obs[self.val_t[idx]],
+                                               self.pre_obs[self.val_t[idx] + 1]),
+                        len(self.val_t), device=self.device)  # fmt: skip
+        hits = (pred == self.val_actions).numpy()
+        truth = self.val_actions.numpy()
+        per_class = [float(hits[truth == c].mean()) if (truth == c).any() else float("nan")
+                     for c in range(self.data.n_actions)]  # fmt: skip
+        return {"accuracy": float(hits.mean()), "class_accuracy": per_class}
+
+    def _train_idm_checked(self, max_epochs: int, iteration: int) -> dict[str, Any]:
+        """Train the IDM with early stopping; apply the dead-IDM rule (module docstring)."""
+        loss, epochs = self._train_idm(max_epochs)
+        health, reinitialised = self.validate_idm(), 0
+        if self._at_chance(health):
+            self._new_idm()  # fresh weights from the run's torch generator, then once more
+            loss, epochs = self._train_idm(max_epochs)
+            health, reinitialised = self.validate_idm(), 1
+        stats = {"idm_loss": loss, "idm_epochs": epochs, "idm_val_accuracy": health["accuracy"],
+                 "idm_val_class_accuracy": health["class_accuracy"], "idm_chance": self.chance,
+                 "idm_reinitialised": reinitialised}  # fmt: skip
+        if self._at_chance(health):
+            raise TrainingFailed(
+                "idm_at_chance",
+                f"the IDM is at chance after re-initialisation (iteration {iteration}: held-out "
+                f"accuracy {health['accuracy']:.3f}, chance {self.chance:.3f}); its labels would"
+                " be one action for every expert pair, so the run stops without a result",
+                stats,
+            )
+        return stats
+
+    def _at_chance(self, health: dict[str, Any]) -> bool:
+        return len(self.val_t) >= MIN_JUDGED and health["accuracy"] < self.chance + DEAD_MARGIN
+
+    def _new_idm(self) -> None:
+        _, idm = build_networks(self.data.observation_space, self.data.n_actions,
+                                self.config.arch, bool(self.config.attention),
+                                self.config.idm_input, **self.net_stats)  # fmt: skip
+        self.idm = idm.to(self.device)
+        self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=self.config.lr)
+
+    def _train_idm(self, max_epochs: int) -> tuple[float, int]:
+        """Epochs of the IDM over ``I_s = I_pre[s_pre] + I_pos[s_pos]`` until the held-out
+        accuracy stops improving (``idm_patience``) or ``max_epochs``; the best weights are
+        kept. Returns the last epoch's mean loss and the epochs run."""
+        best, best_state, stale, loss, epochs = -1.0, None, 0, float("nan"), 0
+        for epoch in range(1, max_epochs + 1):
+            epochs, loss = epoch, self._idm_epoch()
+            accuracy = self.validate_idm()["accuracy"]
+            if np.isnan(accuracy) or accuracy > best:
+                best, stale = accuracy, 0
+                best_state = {k: v.detach().clone() for k, v in self.idm.state_dict().items()}
+            else:
+                stale += 1
+            if stale >= self.config.idm_patience:
+                break
+        if best_state is not None:
+            self.idm.load_state_dict(best_state)
+        return loss, epochs
+
+    def _idm_epoch(self) -> float:
+        """One cross-entropy epoch of the IDM over ``I_s = I_pre[s_pre] + I_pos[s_pos]``."""
+        n_pre = len(self.s_pre)
+        labels = torch.cat([self.pre_actions[self.s_pre], self.pos_actions[self.s_pos]])
+
+        def pairs(idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            is_pre = idx < n_pre
+            s = torch.empty((len(idx), *self.pre_obs.shape[1:]), dtype=self.pre_obs.dtype)
+            s1 = torch.empty_like(s)
+            rows = self.pre_t[self.s_pre[idx[is_pre]]]
+            s[is_pre], s1[is_pre] = self.pre_obs[rows], self.pre_obs[rows + 1]
+            rows = self.pos_t[self.s_pos[idx[~is_pre] - n_pre]]
+            s[~is_pre], s1[~is_pre] = self.pos_obs[rows], self.pos_obs[rows + 1]
+            return s, s1
+
+        return _fit(self.idm, self.idm_opt, pairs, labels, 1, self.config.batch_size,
+                    self.rng, "IDM", self.config.quiet, self.device, self.augment)  # fmt: skip
+
+    # -- post-demonstrations and the next I_s --------------------------------------------------
+
+    def observe(self, iteration: int, rollouts: Rollouts) -> dict[str, float]:
+        """Append the runs to ``I_pos`` and re-sample ``I_s`` for the next iteration."""
+        if not self.iterative or self.idm_data is None or rollouts.observations is None:
+            return {}
+        if iteration + 1 < self.num_iterations:  # the last iteration's runs train nothing
+            self.count("post_demonstration", int(rollouts.lengths.sum()))
+        keep_all = self.idm_data in ("pos", "pre+pos", "whole")
+        runs = np.arange(len(rollouts.successes))
+        keep = runs if keep_all else runs[rollouts.successes]
+        offset = int(self.pos_wins.shape[0])
+        if len(keep):
+            sel = np.isin(rollouts.run_ids, keep)
+            obs_rows = np.unique(np.concatenate([rollouts.obs_t[sel], rollouts.obs_t[sel] + 1]))
+            remap = np.full(len(rollouts.observations), -1, dtype=np.int64)
+            remap[obs_rows] = np.arange(len(obs_rows)) + len(self.pos_obs)
+            new_obs = torch.from_numpy(rollouts.observations[obs_rows])
+            self.pos_obs = torch.cat([self.pos_obs, new_obs])
+            self.pos_t = torch.cat([self.pos_t, torch.from_numpy(remap[rollouts.obs_t[sel]])])
+            new_actions = torch.from_numpy(rollouts.actions[sel])
+            self.pos_actions = torch.cat([self.pos_actions, new_actions])
+            self.pos_runs = np.concatenate([self.pos_runs, offset + rollouts.run_ids[sel]])
+        self.pos_wins = np.concatenate([self.pos_wins, rollouts.successes])
+        if self.idm_data == "pre+pos":  # Torabi et al.: I_pre and every post-demonstration
+            self.s_pos = torch.arange(len(self.pos_t))
+            return {"pos_transitions": len(self.pos_t), "is_from_pos": len(self.s_pos),
+                    "is_from_pre": len(self.s_pre)}  # fmt: skip
+        if self.idm_data == "pos":  # BCO(alpha): every post-demonstration so far
+            self.s_pre = torch.zeros(0, dtype=torch.long)
+            self.s_pos = torch.arange(len(self.pos_t))
+            if len(self.s_pos) == 0:  # nothing recorded yet: keep I_pre
+                self.s_pre = torch.arange(len(self.pre_t))
+            return {"pos_transitions": len(self.pos_t)}
+        size = min(len(self.pre_t), self.config.idm_samples or len(self.pre_t))
+        sample = sample_training_set(
+            self.pre_actions.numpy(), self.pos_actions.numpy(), self.pos_runs, self.pos_wins,
+            size, self.rng, mode=self.idm_data, win_rate=rollouts.win_rate,
+            n_actions=self.data.n_actions,
+        )  # fmt: skip
+        self.s_pre = torch.from_numpy(sample.pre_indices)
+        self.s_pos = torch.from_numpy(sample.pos_indices)
+        return {"pos_transitions": len(self.pos_t), "is_from_pos": len(self.s_pos),
+                "is_from_pre": len(self.s_pre)}  # fmt: skip
+
+    # -- acting, labels and state ---------------------------------------------------------------
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Greedy actions of the policy for a batch of observations."""
+        self.policy.eval()
+        return self.policy(torch.as_tensor(obs, device=self.device)).argmax(1).cpu().numpy()
+
+    def expert_labels(self) -> np.ndarray | None:
+        """The labels the policy was last trained on (IDM predictions of the expert pairs)."""
+        return self.labels
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything needed to resume: nets, optimisers, I_pos, I_s, labels, rng."""
+        return {
+            "policy": self.policy.state_dict(), "idm": self.idm.state_dict(),
+            "policy_opt": self.policy_opt.state_dict(), "idm_opt": self.idm_opt.state_dict(),
+            "pos_obs": self.pos_obs, "pos_t": self.pos_t, "pos_actions": self.pos_actions,
+            "pos_runs": self.pos_runs, "pos_wins": self.pos_wins,
+            "s_pre": self.s_pre, "s_pos": self.s_pos, "labels": self.labels,
+            "rng": self.rng.bit_generator.state,
+        }  # fmt: skip
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`state_dict`."""
+        self.policy.load_state_dict(state["policy"])
+        self.idm.load_state_dict(state["idm"])
+        self.policy_opt.load_state_dict(state["policy_opt"])
+        self.idm_opt.load_state_dict(state["idm_opt"])
+        for key in ("pos_obs", "pos_t", "pos_actions", "pos_runs", "pos_wins", "s_pre", "s_pos",
+                    "labels"):  # fmt: skip
+            setattr(self, key, state[key])
+        self.rng.bit_generator.state = state["rng"]

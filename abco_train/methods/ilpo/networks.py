@@ -1,0 +1,245 @@
+"""ILPO's losses and networks (:mod:`abco_train.methods.ilpo.method` maps them to the paper and
+trains them).
+
+The min-over-latents and expected-prediction losses, the latent forward models ``G(E(s), z)``
+for vectors and frames (with :class:`CellAverage` for the maze's cells), the latent policy
+``pi(z | s)`` and the remapping classifier ``P(a | s, z)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from abco_envs.maze.render import cell_edges
+from abco_train.networks.builders import CompactCNN, image_input
+
+__all__ = ["latent_errors", "min_over_latents_loss", "expected_prediction_loss", "Standardise",
+           "VectorForwardModel", "CellAverage", "ImageForwardModel", "latent_policy",
+           "ILPONet", "RemapNet"]  # fmt: skip
+
+
+# -- the losses -------------------------------------------------------------------------------
+
+
+def latent_errors(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """``(B, k)`` mean squared error of each latent's prediction ``(B, k, D)`` to ``(B, D)``."""
+    return (pred - target.unsqueeze(1)).pow(2).mean(-1)
+
+
+def min_over_latents_loss(pred: torch.Tensor, target: torch.Tensor, relax: float = 0.0
+                          ) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+    """``L_min``: the batch mean of ``min_z ||pred_z - target||^2`` and the best latents.
+
+    The gradient reaches only each row's best latent (the minimum's).
+
+    Args:
+        pred: ``(B, k, D)`` predictions, one per latent action.
+        target: ``(B, D)`` observed changes.
+
+    Returns:
+        The loss (a scalar) and ``(B,)`` the argmin latents ``z*``.
+
+    Example:
+        >>> pred = torch.tensor([[[0.0, 0.0], [1.0, 1.0]]])
+        >>> loss, best = min_over_latents_loss(pred, torch.tensor([[1.0, 1.0]]))
+        >>> float(loss), best.tolist()
+        (0.0, [1])
+    """
+    errors = latent_errors(pred, target)
+    best_error, best = errors.min(dim=1)
+    loss = best_error.mean()
+    if relax > 0.0:
+        loss = (1.0 - relax) * loss + relax * errors.mean()
+    return loss, best
+
+
+def expected_prediction_loss(probs: torch.Tensor, pred: torch.Tensor, target: torch.Tensor,
+                             pred_weight: float = 0.0) -> torch.Tensor:  # fmt: skip
+    """``L_exp``: the batch mean of ``||sum_z probs_z pred_z - target||^2``.
+
+    Args:
+        probs: ``(B, k)`` latent policy ``pi(z | s)``.
+        pred: ``(B, k, D)`` the latent forward model's predictions.
+        target: ``(B, D)`` observed changes.
+        pred_weight: How much of the gradient reaches ``pred`` (0: the predictions are held
+            fixed and only ``probs`` learns, as in the authors' code; 1: all of it). The value
+            of the loss does not depend on it.
+    """
+    if pred_weight <= 0.0:
+        pred = pred.detach()
+    elif pred_weight < 1.0:
+        pred = pred_weight * pred + (1.0 - pred_weight) * pred.detach()
+    expected = (probs.unsqueeze(-1) * pred).sum(1)
+    return (expected - target).pow(2).mean(-1).mean()
+
+
+# -- the networks ---------------------------------------------------------------------------
+
+
+class Standardise(nn.Module):
+    """``(x - mean) / std`` with fixed buffers."""
+
+    def __init__(self, mean: np.ndarray, std: np.ndarray) -> None:
+        super().__init__()
+        self.register_buffer("mean", torch.as_tensor(mean, dtype=torch.float32))
+        self.register_buffer("std", torch.as_tensor(std, dtype=torch.float32))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Standardised ``x``."""
+        return (x.float() - self.mean) / self.std
+
+
+class VectorForwardModel(nn.Module):
+    """``G(E(s), z)`` for vector states: the standardised change each latent action makes.
+
+    ``E`` is a two-layer MLP; as in the authors' network, ``z``'s learnt embedding is added to
+    a linear map of ``E(s)`` (a linear layer over ``concat(E(s), onehot(z))``) and two more
+    layers map it to the prediction. All ``k`` latents are predicted in one pass.
+    """
+
+    def __init__(self, in_features: int, latents: int, hidden: int, mean: np.ndarray,
+                 std: np.ndarray) -> None:  # fmt: skip
+        super().__init__()
+        self.embedding = nn.Sequential(
+            Standardise(mean, std), nn.Linear(in_features, hidden), nn.LeakyReLU(0.2),
+            nn.Linear(hidden, hidden), nn.LeakyReLU(0.2),
+        )  # fmt: skip
+        self.state = nn.Linear(hidden, hidden)
+        self.latent = nn.Parameter(torch.randn(latents, hidden))
+        self.head = nn.Sequential(
+            nn.LeakyReLU(0.2), nn.Linear(hidden, hidden), nn.LeakyReLU(0.2),
+            nn.Linear(hidden, in_features),
+        )  # fmt: skip
+        self.embedding_features, self.out_features = hidden, in_features
+
+    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(E(s) of shape (B, F), predictions (B, k, D))``."""
+        h = self.embedding(obs)
+        return h, self.head(self.state(h).unsqueeze(1) + self.latent)
+
+
+class CellAverage(nn.Module):
+    """The mean (``total``: the sum) of a ``(B, C, H, W)`` map over each cell of an
+    ``n x n`` maze: ``(B, C, n, n)``.
+
+    Cell borders fall where the renderer draws them (:func:`abco_envs.maze.render.cell_edges`),
+    so every cell takes exactly its own pixels
+    (``target="cells"``, module docstring).
+    """
+
+    def __init__(self, grid: int, height: int, width: int, total: bool = False) -> None:
+        super().__init__()
+        self.grid = int(grid)
+        self.register_buffer("rows", self._means(grid, height, total), persistent=False)
+        self.register_buffer("cols", self._means(grid, width, total), persistent=False)
+
+    @staticmethod
+    def _means(grid: int, size: int, total: bool) -> torch.Tensor:
+        """``(grid, size)``: row ``i`` averages (``total``: sums) the pixels of band ``i``."""
+        edges = cell_edges(grid, size)
+        m = np.zeros((grid, size), dtype=np.float32)
+        for i in range(grid):
+            m[i, edges[i] : edges[i + 1]] = 1.0 if total else 1.0 / (edges[i + 1] - edges[i])
+        return torch.from_numpy(m)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.rows @ x @ self.cols.T
+
+
+class ImageForwardModel(nn.Module):
+    """``G(E(s), z)`` for frames: the pooled difference image each latent action makes.
+
+    Fully convolutional at the target's resolution (``H/pool x W/pool``): ``E`` is a strided
+    convolution to that grid and three 3x3 convolutions (dilations 1, 2, 4); ``z``'s learnt
+    embedding is added to every position's channels, and two 3x3 convolutions predict the
+    pooled difference. Every position applies the same filters, so a latent action means the
+    same move wherever the agent is (an MLP head over flat features is free to let latent 0
+    mean "down" in one cell and "right" in another, and does). With ``cells`` (``n``, the
+    maze's size) it is local and on the maze's cells (module docstring): a 3x3 convolution at
+    full resolution averaged over each cell, a 1x1 convolution, the latent, then a 3x3 and a
+    1x1 convolution predict each cell's change. ``E(s)`` is also returned average-pooled to
+    4x4 (the remapping's view of the state).
+    """
+
+    def __init__(self, image_shape: tuple[int, int, int], latents: int, pool: int,
+                 channels: int, cells: int | None = None) -> None:  # fmt: skip
+        super().__init__()
+        h, w, c = image_shape
+        ch = channels
+        if cells is not None:  # local: each cell sees its 3x3 neighbourhood of cells only
+            self.embedding = nn.Sequential(
+                nn.Conv2d(c, ch, 3, padding=1), nn.LeakyReLU(0.2), CellAverage(cells, h, w),
+                nn.Conv2d(ch, ch, 1), nn.LeakyReLU(0.2),
+            )  # fmt: skip
+            head_out: nn.Module | None = nn.Conv2d(ch, 1, 1)
+        else:
+            self.embedding = nn.Sequential(
+                nn.Conv2d(c, ch, pool, stride=pool), nn.LeakyReLU(0.2),
+                nn.Conv2d(ch, ch, 3, padding=1), nn.LeakyReLU(0.2),
+                nn.Conv2d(ch, ch, 3, padding=2, dilation=2), nn.LeakyReLU(0.2),
+                nn.Conv2d(ch, ch, 3, padding=4, dilation=4), nn.LeakyReLU(0.2),
+            )  # fmt: skip
+            head_out = None
+        # Torch draws initial weights in construction order, so the order is part of each
+        # path's defaults and published figures: "cells" builds its last layer before the
+        # latent, the pooled path (3x3, 5x5) builds it last, as it always has.
+        self.latent = nn.Parameter(torch.randn(latents, ch))
+        head_conv = nn.Conv2d(ch, ch, 3, padding=1)
+        if head_out is None:
+            head_out = nn.Conv2d(ch, c, 3, padding=1)
+        self.head = nn.Sequential(nn.LeakyReLU(0.2), head_conv, nn.LeakyReLU(0.2), head_out)
+        self.embedding_features = ch * 16
+        self.out_features = cells * cells if cells is not None else c * (h // pool) * (w // pool)
+
+    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(E(s) pooled to 4x4 and flattened (B, 16 C), predictions (B, k, D))``."""
+        grid = self.embedding(image_input(obs))
+        b, k = len(grid), len(self.latent)
+        mixed = grid.unsqueeze(1) + self.latent[None, :, :, None, None]
+        pred = self.head(mixed.flatten(0, 1)).reshape(b, k, -1)
+        return F.adaptive_avg_pool2d(grid, 4).flatten(1), pred
+
+
+def latent_policy(observation_shape: tuple[int, ...], latents: int, hidden: int,
+                  mean: np.ndarray | None = None, std: np.ndarray | None = None
+                  ) -> nn.Module:  # fmt: skip
+    """``pi(z | s)`` as logits: an MLP for vectors, the compact CNN (no attention) for frames."""
+    if len(observation_shape) == 1:
+        d = observation_shape[0]
+        return nn.Sequential(
+            Standardise(mean, std), nn.Linear(d, hidden), nn.LeakyReLU(0.2),
+            nn.Linear(hidden, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, latents),
+        )  # fmt: skip
+    cnn = CompactCNN(observation_shape, attention=False)  # type: ignore[arg-type]
+    return nn.Sequential(cnn, nn.Linear(cnn.out_features, hidden), nn.LeakyReLU(0.2),
+                         nn.Linear(hidden, latents))  # fmt: skip
+
+
+class ILPONet(nn.Module):
+    """The latent forward model ``G`` (with its embedding ``E``) and the latent policy ``pi``."""
+
+    def __init__(self, forward_model: nn.Module, policy: nn.Module) -> None:
+        super().__init__()
+        self.forward_model, self.policy = forward_model, policy
+
+    def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(E(s), G(E(s), .) of shape (B, k, D), pi's logits (B, k))``."""
+        h, pred = self.forward_model(obs)
+        return h, pred, self.policy(obs)
+
+
+class RemapNet(nn.Module):
+    """``P(a | s, z)``: a small classifier over features of ``(s, z)`` (``ILPO._remap_input``)."""
+
+    def __init__(self, in_features: int, n_actions: int, hidden: int = 64) -> None:
+        super().__init__()
+        self.body = nn.Sequential(
+            nn.Linear(in_features, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, n_actions),
+        )  # fmt: skip
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Action logits."""
+        return self.body(x)

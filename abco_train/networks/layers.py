@@ -1,0 +1,57 @@
+"""Layers shared by every image network: SAGAN self-attention over a feature map and the
+frame-to-tensor conversion (:mod:`abco_train.networks.builders`,
+:mod:`abco_train.networks.cells`)."""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+__all__ = ["SelfAttention2d", "image_input"]
+
+
+class SelfAttention2d(nn.Module):
+    """SAGAN self-attention over the ``N = H * W`` positions of a feature map.
+
+    ``f = W_f x`` (key), ``g = W_g x`` (query), ``h = W_h x`` (value) are 1x1 convolutions to
+    ``C / k`` channels; ``beta_{j,i} = softmax_i(f(x_i)^T g(x_j))``;
+    ``a_j = W_v sum_i beta_{j,i} h(x_i)`` (a 1x1 convolution back to ``C`` channels); the
+    output is ``x + mu * a`` with ``mu`` a learnable scalar initialised at 0, so the module is
+    the identity at initialisation (Eqs. 7-8 of the paper).
+
+    Args:
+        channels: ``C``.
+        reduction: ``k``; the key/query/value width is ``max(1, C // k)``.
+    """
+
+    def __init__(self, channels: int, reduction: int = 8) -> None:
+        super().__init__()
+        inner = max(1, channels // reduction)
+        # 1x1 convolutions are per-position linear maps; nn.Linear on the (B, N, C) tokens
+        # computes exactly that and avoids oneDNN's slow path for tiny 1x1 convs on CPU.
+        self.key = nn.Linear(channels, inner)
+        self.query = nn.Linear(channels, inner)
+        self.value = nn.Linear(channels, inner)
+        self.out = nn.Linear(inner, channels)
+        self.mu = nn.Parameter(torch.zeros(()))
+
+    def attend(self, x: torch.Tensor) -> torch.Tensor:
+        """The attention feature map ``a`` (before weighting by ``mu``), same shape as ``x``."""
+        b, c, h, w = x.shape
+        tokens = x.flatten(2).transpose(1, 2)  # (B, N, C): one token per position
+        key, query, value = self.key(tokens), self.query(tokens), self.value(tokens)
+        scores = torch.bmm(query, key.transpose(1, 2))  # s[j, i] = g(x_j) . f(x_i)
+        beta = torch.softmax(scores, dim=-1)  # over the attended positions i
+        mixed = torch.bmm(beta, value)  # (B, N, C'): sum_i beta_ji h(x_i)
+        return self.out(mixed).transpose(1, 2).reshape(b, c, h, w)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``x + mu * a(x)``."""
+        return x + self.mu * self.attend(x)
+
+
+def image_input(x: torch.Tensor) -> torch.Tensor:
+    """``(B, H, W, C)`` images (uint8, or float in ``[-1, 1]``) -> ``(B, C, H, W)`` float."""
+    if x.dtype == torch.uint8:
+        x = x.float().div_(255.0)
+    return x.permute(0, 3, 1, 2)
