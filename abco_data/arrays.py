@@ -9,8 +9,8 @@ Example:
     ...     actions=None, rewards=np.ones(2), terminations=np.array([False, True]),
     ...     truncations=np.zeros(2, bool), episode_return=2.0)
     >>> a = DatasetArrays.of_episode(ep)
-    >>> ep.length, a.episode_lengths.tolist(), a.nbytes
-    (2, [2], 138)
+    >>> ep.length, a.episode_lengths.tolist(), a.episode_returns.tolist()
+    (2, [2], [2.0])
 """
 
 from __future__ import annotations

@@ -95,7 +95,7 @@ def claimed_overrides(ds: Dataset) -> dict[str, Any]:
         # A variant is never bigger than the published dataset: reproducing one costs at
         # most as much as generating the published one (the seed may be any integer).
         in_range = name == "seed" or isinstance(value, bool) or (
-            isinstance(value, int) and 0 <= value <= default)
+            isinstance(value, int) and isinstance(default, int) and 0 <= value <= default)
         if not (same_type and in_range):
             raise CorruptDatasetError(f"{ds.path}: creation parameter {name}={value!r} is not"
                                       f" a valid variant of {ds.id}")

@@ -227,8 +227,8 @@ def add_subcommands(subparsers: Any) -> argparse.ArgumentParser:
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``python -m abco_data``."""
-    parser = argparse.ArgumentParser(prog="python -m abco_data", description=__doc__
-                                     .split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m abco_data",
+                                     description=(__doc__ or "").split("\n")[0])
     _add_actions(parser.add_subparsers(dest="data_command", required=True, metavar="ACTION"))
     return parser
 

@@ -19,7 +19,7 @@ import os
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import h5py
 import numpy as np
@@ -46,21 +46,13 @@ from abco_data.format import (
 )
 from abco_data.header import read_header, read_whole_column
 from abco_data.reference import ReferenceReturns
+from abco_data.registry import check_layout_count
 from abco_data.validation import check_values
 
-__all__ = ["Dataset", "open_dataset", "check_layout_count"]
+if TYPE_CHECKING:  # imported when called: ``import abco_data`` does not import torch
+    from abco_data.torch_view import TransitionDataset
 
-
-#: The column of each field of :class:`DatasetArrays` but ``observations``.
-_ARRAY_COLUMNS = {
-    "actions": ACTIONS, "idm_eval_actions": IDM_EVAL_ACTIONS, "rewards": REWARDS,
-    "terminations": TERMINATIONS, "truncations": TRUNCATIONS,
-    "episode_starts": episode_column("obs_offset"),
-    "episode_transition_starts": episode_column("transition_offset"),
-    "episode_lengths": episode_column("length"), "episode_seeds": episode_column("seed"),
-    "episode_returns": episode_column("return"), "positions": POSITIONS,
-    "layouts": episode_column("layout"), "layout_indices": episode_column("layout_index"),
-}
+__all__ = ["Dataset", "open_dataset"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,12 +86,12 @@ class Dataset:
     action_space: spaces.Discrete
     reference: ReferenceReturns
     layouts_taken: int | None = None
-    _index: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
-    _h5: LazyH5File = field(default=None, repr=False)  # type: ignore[assignment]
+    # Per instance, never copied (a view of ``dataclasses.replace`` gets its own).
+    _index: dict[str, np.ndarray] = field(default_factory=dict, init=False, repr=False)
+    _h5: LazyH5File = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if self._h5 is None:
-            object.__setattr__(self, "_h5", LazyH5File(self.path))
+        object.__setattr__(self, "_h5", LazyH5File(self.path))
 
     # -- file access -------------------------------------------------------------------------
 
@@ -204,7 +196,7 @@ class Dataset:
         n_ep = int(starts[k]) if k < len(starts) else self.num_episodes
         n_tr = int(self._episode_index()["length"][:n_ep].sum())
         return dataclasses.replace(self, num_episodes=n_ep, num_transitions=n_tr,
-                                   layouts_taken=int(k), _index={}, _h5=None)
+                                   layouts_taken=int(k))
 
     # -- episodes -----------------------------------------------------------------------------
 
@@ -233,7 +225,7 @@ class Dataset:
                 positions=col(POSITIONS)[o : o + n + 1] if maze else None,
             )
         check_values(DatasetArrays.of_episode(episode),
-                     action_count=self.action_space.n, path=f"{self.path} (episode {i})",
+                     action_count=int(self.action_space.n), path=f"{self.path} (episode {i})",
                      observation_space=self.observation_space)
         return episode
 
@@ -256,13 +248,29 @@ class Dataset:
         reader = self._observations()
         rows = expected_rows(self.kind, self.num_episodes, self.num_transitions,
                              maze=POSITIONS in f)  # a view's prefix, or every row
-        with hdf5_errors(self.path, "columns"):
-            cols = {name: read_whole_column(h5_column(f, col), self.path, rows.get(col))
-                    if col in f else None for name, col in _ARRAY_COLUMNS.items()}
+
+        def column(name: str) -> np.ndarray:
+            return read_whole_column(h5_column(f, name), self.path, rows.get(name))
+
+        def optional(name: str) -> np.ndarray | None:
+            return column(name) if name in f else None
+
         n_obs = self.num_transitions + self.num_episodes
-        obs = self._read_obs(0, n_obs, np.empty((n_obs, *reader.shape[1:]), dtype=reader.dtype))
-        arrays = DatasetArrays(observations=obs, **cols)
-        check_values(arrays, action_count=self.action_space.n, path=self.path,
+        with hdf5_errors(self.path, "columns"):  # the observations last, as they are read
+            arrays = DatasetArrays(
+                actions=optional(ACTIONS), idm_eval_actions=optional(IDM_EVAL_ACTIONS),
+                rewards=column(REWARDS), terminations=column(TERMINATIONS),
+                truncations=column(TRUNCATIONS),
+                episode_starts=column(episode_column("obs_offset")),
+                episode_transition_starts=column(episode_column("transition_offset")),
+                episode_lengths=column(episode_column("length")),
+                episode_seeds=column(episode_column("seed")),
+                episode_returns=column(episode_column("return")), positions=optional(POSITIONS),
+                layouts=optional(episode_column("layout")),
+                layout_indices=optional(episode_column("layout_index")),
+                observations=self._read_obs(0, n_obs, np.empty((n_obs, *reader.shape[1:]),
+                                                               dtype=reader.dtype)))
+        check_values(arrays, action_count=int(self.action_space.n), path=self.path,
                      observation_space=self.observation_space)
         return arrays
 
@@ -347,26 +355,11 @@ class Dataset:
         out = np.concatenate(picked) if picked else np.empty(0, dtype=np.int64)
         return rng.permutation(out).astype(np.int64)
 
-    def torch_dataset(self, in_memory: bool = False, **kwargs: Any) -> Any:
+    def torch_dataset(self, in_memory: bool = False, **kwargs: Any) -> TransitionDataset:
         """A ``torch.utils.data.Dataset`` of transitions (see :mod:`abco_data.torch_view`)."""
         from abco_data.torch_view import TransitionDataset
 
         return TransitionDataset(self, in_memory=in_memory, **kwargs)
-
-
-def check_layout_count(k: object, available: int, what: str, dataset_id: str) -> int:
-    """``k`` as an int from 1 to ``available`` (the layouts of ``dataset_id``).
-
-    Raises:
-        ValueError: Anything else; the message starts with ``what``.
-    """
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)):
-        raise ValueError(f"{what}: the number of layouts must be an integer from 1 to"
-                         f" {available}, got {type(k).__name__}")
-    if not 1 <= k <= available:
-        raise ValueError(f"{what} is out of range: {dataset_id} has {available} layouts; take"
-                         f" from 1 to {available}")
-    return int(k)
 
 
 def open_dataset(path: str | os.PathLike[str], *, dataset_id: str | None = None,

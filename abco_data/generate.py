@@ -137,7 +137,7 @@ def _progress_total(s: DatasetSpec) -> tuple[int, str]:
 def _write_reference(w: DatasetWriter, ref: ReferenceReturns) -> None:
     w.attrs["reference_expert_mean"] = ref.expert_mean
     w.attrs["reference_random_mean"] = ref.random_mean
-    if ref.layout_ids is not None:
+    if ref.expert_per_layout is not None and ref.random_per_layout is not None:
         values = (np.array(ref.layout_ids), np.array(ref.layout_splits), ref.expert_per_layout,
                   ref.random_per_layout)
         for column, value in zip(REFERENCE_COLUMNS, values):
@@ -165,6 +165,7 @@ def generate(dataset_id: str, path: str | os.PathLike[str] | None = None, *,
     from tqdm.auto import tqdm
 
     import abco_envs  # noqa: F401  (registers the mazes)
+    from abco_envs.maze.env import maze_cells
 
     s = spec(dataset_id).with_overrides(**overrides)
     if path is None:
@@ -174,7 +175,7 @@ def generate(dataset_id: str, path: str | os.PathLike[str] | None = None, *,
         path = data_home() / s.filename
     path = Path(path)
     # The split is not an env_kwargs entry of the file: evaluation envs pick their own split.
-    split = {"split": layout_split(s.params)} if s.is_maze else {}
+    split: dict[str, Any] = {"split": layout_split(s.params)} if s.is_maze else {}
     ref = reference_for(s)
     env = gym.make(s.env_id, **_env_kwargs(s), **split)
     actions_name = action_column(s.kind)
@@ -190,7 +191,7 @@ def generate(dataset_id: str, path: str | os.PathLike[str] | None = None, *,
             w.append(TRUNCATIONS, np.asarray(cols["truncations"], dtype=bool))
             if s.is_maze:
                 w.append(POSITIONS, np.asarray(cols["positions"], dtype=np.int64))
-                layouts.append(np.asarray(env.unwrapped.cells, dtype=np.uint8))
+                layouts.append(np.asarray(maze_cells(env), dtype=np.uint8))
             seeds.append(ep_seed)
             layout_index.append(k)
             lengths.append(len(cols["actions"]))

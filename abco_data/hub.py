@@ -49,7 +49,7 @@ from huggingface_hub import constants, hf_hub_download, try_to_load_from_cache
 from huggingface_hub.errors import EntryNotFoundError, HfHubHTTPError, OfflineModeIsEnabled
 from huggingface_hub.utils import httpx, silent_tqdm
 
-from abco_data.dataset import Dataset, check_layout_count, open_dataset
+from abco_data.dataset import Dataset, open_dataset
 from abco_data.errors import (
     ChecksumError,
     DatasetNotAvailableError,
@@ -71,7 +71,7 @@ from abco_data.manifest import (
     read_manifest,
     verify_file,
 )
-from abco_data.registry import spec
+from abco_data.registry import check_layout_count, spec
 
 __all__ = [
     "DEFAULT_REPO_ID",
@@ -128,15 +128,16 @@ def _hub_file(
         )
     try:
         # Endpoint and cache are huggingface_hub's own; silent_tqdm is the do-nothing bar it
-        # passes itself where it wants no progress shown.
-        local = hf_hub_download(
+        # passes itself where it wants no progress shown (its annotation of tqdm_class asks
+        # for a tqdm subclass, which silent_tqdm is not: hence the two ignores).
+        local = hf_hub_download(  # pyright: ignore[reportCallIssue]
             repo_id=manifest.repo_id,
             filename=entry.filename,
             repo_type="dataset",
             revision=rev,
             local_files_only=local_files_only,
             force_download=force_download,
-            tqdm_class=None if progress else silent_tqdm,  # type: ignore[arg-type]
+            tqdm_class=None if progress else silent_tqdm,  # pyright: ignore[reportArgumentType]
         )
     except HUB_ERRORS as err:
         if local_files_only:

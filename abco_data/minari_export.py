@@ -23,11 +23,13 @@ import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import minari
 import numpy as np
 from gymnasium import spaces
+from gymnasium.envs.registration import EnvSpec
 from minari.data_collector import EpisodeBuffer
 from minari.namespace import create_namespace, list_local_namespaces
 
@@ -35,7 +37,7 @@ import abco_envs  # noqa: F401  (registers the maze ids that the datasets' env s
 from abco_data.arrays import DatasetArrays
 from abco_data.dataset import Dataset, open_dataset
 from abco_data.files import atomic_target, remove_path, temporary_name
-from abco_data.format import ACTIONS, IDM_EVAL_ACTIONS
+from abco_data.format import IDM_EVAL_ACTIONS
 
 __all__ = ["export_to_minari", "NO_ACTIONS"]
 
@@ -62,21 +64,24 @@ def _minari_root(root: Path) -> Iterator[None]:
 def _buffers(ds: Dataset, a: DatasetArrays) -> Iterator[EpisodeBuffer]:
     """One episode buffer per episode; expert episodes with no actions (see the module)."""
     expert = ds.action_column == IDM_EVAL_ACTIONS
+    actions, idm_eval = (None, a.idm_eval_actions) if expert else (a.actions, None)
     for e in range(ds.num_episodes):
         o, t, n = (int(x[e]) for x in (a.episode_starts, a.episode_transition_starts,
                                        a.episode_lengths))
         steps = slice(t, t + n)
+        # Minari annotates these fields as lists, but its storage takes numpy arrays as well
+        # (no list of every frame): hence a plain dict of keyword arguments.
+        columns: dict[str, Any] = {
+            "observations": a.observations[o : o + n + 1],
+            "actions": np.empty((n, 0), dtype=np.int64) if actions is None else actions[steps],
+            "rewards": a.rewards[steps], "terminations": a.terminations[steps],
+            "truncations": a.truncations[steps]}
         yield EpisodeBuffer(
-            id=e, seed=int(a.episode_seeds[e]), observations=a.observations[o : o + n + 1],
-            actions=(np.empty((n, 0), dtype=np.int64) if expert
-                     else getattr(a, ACTIONS)[steps]),
-            rewards=a.rewards[steps], terminations=a.terminations[steps],
-            truncations=a.truncations[steps],
-            infos={IDM_EVAL_ACTIONS: a.idm_eval_actions[steps]} if expert else None,
-        )
+            id=e, seed=int(a.episode_seeds[e]), **columns,
+            infos=None if idm_eval is None else {IDM_EVAL_ACTIONS: idm_eval[steps]})
 
 
-def _env_spec(ds: Dataset) -> gym.envs.registration.EnvSpec:
+def _env_spec(ds: Dataset) -> EnvSpec:
     """The spec of the env the data came from, with the ``env_kwargs`` it was made with."""
     base = gym.spec(ds.env_id)
     kwargs = json.loads(ds.attrs.get("env_kwargs", "{}"))

@@ -73,11 +73,11 @@ class ReferenceReturns:
         """``P`` of one return, normalised on ``layout_id``'s references when given."""
         expert, random = self.expert_mean, self.random_mean
         if layout_id is not None:
-            if self.layout_ids is None or layout_id not in self.layout_ids:
+            ids, experts, randoms = self.layout_ids, self.expert_per_layout, self.random_per_layout
+            if ids is None or experts is None or randoms is None or layout_id not in ids:
                 raise KeyError(f"no reference returns for layout {layout_id!r}")
-            i = self.layout_ids.index(layout_id)
-            expert = float(self.expert_per_layout[i])  # type: ignore[index]
-            random = float(self.random_per_layout[i])  # type: ignore[index]
+            i = ids.index(layout_id)
+            expert, random = float(experts[i]), float(randoms[i])
         return (float(episode_return) - random) / (expert - random)
 
     def extended(self, other: ReferenceReturns) -> ReferenceReturns:

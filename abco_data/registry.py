@@ -7,6 +7,7 @@ authors' start-cell pre-demonstrations) and, for 5x5 and 10x10,
 ``abco/{maze}-procedural-{kind}-v0``: 10,000 layouts of the procedural split
 (:mod:`abco_envs.maze.procedural`), disjoint from the pool's train and test splits. One for
 Acrobot: ``abco/acrobot-pre-held-v0``, random actions each held for several steps.
+:func:`check_layout_count` checks a number of layouts asked of a maze dataset.
 
 Example:
     >>> dataset_id("AbcoMaze5x5-v0", "expert")
@@ -23,13 +24,16 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Any
 
+import numpy as np
+
 import abco_envs
 from abco_data.errors import UnknownDatasetError
 from abco_envs.maze.procedural import PROCEDURAL_SPLIT_SIZE
 
 __all__ = ["DatasetSpec", "DATASET_IDS", "ENV_NAMES", "ACTION_COUNTS", "PROCEDURAL_ENVS",
            "DATASET_SPLITS", "HELD_ENVS", "dataset_id", "procedural_dataset_id",
-           "held_dataset_id", "spec", "is_maze"]
+           "start_cell_dataset_id",
+           "held_dataset_id", "spec", "is_maze", "check_layout_count"]
 
 #: Short dataset name of each environment id.
 ENV_NAMES = {
@@ -191,6 +195,22 @@ def procedural_dataset_id(env_id: str, kind: str) -> str:
     return f"abco/{ENV_NAMES[name]}-procedural-{suffix}-v{VERSION}"
 
 
+def start_cell_dataset_id(env_id: str) -> str:
+    """The id of a maze's start-cell pre-demonstrations without wall hits (the authors' regime).
+
+    Example:
+        >>> start_cell_dataset_id("AbcoMaze5x5-v0")
+        'abco/maze5x5-pre-start-v0'
+
+    Raises:
+        UnknownDatasetError: ``env_id`` is not an abco maze.
+    """
+    name = abco_envs.env_name(env_id)
+    if not is_maze(name) or name not in ENV_NAMES:
+        raise UnknownDatasetError(f"no start-cell abco dataset for env {env_id!r}; mazes only")
+    return f"abco/{ENV_NAMES[name]}-pre-start-v{VERSION}"
+
+
 def held_dataset_id(env_id: str) -> str:
     """The id of the held-action pre-demonstrations of ``env_id`` (Acrobot only).
 
@@ -221,9 +241,9 @@ def _build() -> dict[str, DatasetSpec]:
             params = {**base, "seed": (2 * i + j + 1) * 1_000_000}
             ds_id = dataset_id(env_id, kind)
             specs[ds_id] = DatasetSpec(ds_id, env_id, kind, MappingProxyType(params))
-    for k, (env_id, name) in enumerate((e, n) for e, n in ENV_NAMES.items() if is_maze(e)):
+    for k, env_id in enumerate(e for e in ENV_NAMES if is_maze(e)):
         params = {**_MAZE_PRE_START, "seed": (2 * len(ENV_NAMES) + k + 1) * 1_000_000}
-        ds_id = f"abco/{name}-pre-start-v{VERSION}"
+        ds_id = start_cell_dataset_id(env_id)
         specs[ds_id] = DatasetSpec(ds_id, env_id, "pre_demonstrations", MappingProxyType(params))
     first = 2 * len(ENV_NAMES) + 3 + 1  # after the three start-cell datasets
     for k, (env_id, kind) in enumerate((e, kind) for e in PROCEDURAL_ENVS
@@ -260,3 +280,18 @@ def spec(dataset_id: str) -> DatasetSpec:
         raise UnknownDatasetError(
             f"unknown dataset id {dataset_id!r}; known ids: {', '.join(DATASET_IDS)}"
         ) from None
+
+
+def check_layout_count(k: object, available: int, what: str, dataset_id: str) -> int:
+    """``k`` as an int from 1 to ``available`` (the layouts of ``dataset_id``).
+
+    Raises:
+        ValueError: Anything else; the message starts with ``what``.
+    """
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)):
+        raise ValueError(f"{what}: the number of layouts must be an integer from 1 to"
+                         f" {available}, got {type(k).__name__}")
+    if not 1 <= k <= available:
+        raise ValueError(f"{what} is out of range: {dataset_id} has {available} layouts; take"
+                         f" from 1 to {available}")
+    return int(k)

@@ -110,10 +110,10 @@ class TransitionDataset(TorchDataset):
         if self.indices is not None:
             items = self.indices[items]
         s, s1 = self._rows(items)
-        out = []
+        out: list[tuple[torch.Tensor, ...]] = []
         for j, k in enumerate(items):
             first, last = torch.from_numpy(s[j]), torch.from_numpy(s1[j])
-            if self.with_actions:
+            if self.actions is not None:
                 out.append((first, torch.tensor(int(self.actions[k])), last))
             else:
                 out.append((first, last))

@@ -24,7 +24,7 @@ Example:
 from __future__ import annotations
 
 import os
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from gymnasium import spaces
@@ -32,7 +32,8 @@ from gymnasium import spaces
 from abco_data.arrays import DatasetArrays
 from abco_data.errors import CorruptDatasetError
 
-__all__ = ["check_values", "check_observations", "MAZE_CELL_BITS"]
+__all__ = ["check_values", "check_observations", "maze_columns", "MazeColumns",
+           "MAZE_CELL_BITS"]
 
 #: A maze cell is a bit set of its open sides (N=1, E=2, S=4, W=8).
 MAZE_CELL_BITS = 15
@@ -59,14 +60,36 @@ def _check_episode_ends(a: DatasetArrays, path: object) -> None:
         raise CorruptDatasetError(f"{path}: stored episode returns differ from reward sums")
 
 
-def _check_maze(a: DatasetArrays, path: object) -> None:
-    n = a.layouts.shape[1] if a.layouts.ndim == 3 else -1
-    if a.layouts.ndim != 3 or a.layouts.shape[2] != n or np.any(a.layouts > MAZE_CELL_BITS):
+class MazeColumns(NamedTuple):
+    """The maze-only columns of :class:`~abco_data.arrays.DatasetArrays`, all present."""
+
+    positions: np.ndarray
+    layouts: np.ndarray
+    layout_indices: np.ndarray
+
+
+def maze_columns(a: DatasetArrays, path: object) -> MazeColumns | None:
+    """The maze columns of ``a``, or None if it holds none (not a maze).
+
+    Raises:
+        CorruptDatasetError: Some of them but not all.
+    """
+    if a.positions is None and a.layouts is None and a.layout_indices is None:
+        return None
+    if a.positions is None or a.layouts is None or a.layout_indices is None:
+        raise CorruptDatasetError(f"{path}: maze positions, layouts and layout indices come"
+                                  " together, but some of them are missing")
+    return MazeColumns(a.positions, a.layouts, a.layout_indices)
+
+
+def _check_maze(m: MazeColumns, path: object) -> None:
+    n = m.layouts.shape[1] if m.layouts.ndim == 3 else -1
+    if m.layouts.ndim != 3 or m.layouts.shape[2] != n or np.any(m.layouts > MAZE_CELL_BITS):
         raise CorruptDatasetError(f"{path}: maze layouts are not grids of cell bits")
-    if a.positions.ndim != 2 or a.positions.shape[1] != 2 or np.any(a.positions < 0) \
-            or np.any(a.positions >= n):
+    if m.positions.ndim != 2 or m.positions.shape[1] != 2 or np.any(m.positions < 0) \
+            or np.any(m.positions >= n):
         raise CorruptDatasetError(f"{path}: agent positions lie outside the {n}x{n} maze")
-    if a.layout_indices is None or np.any(a.layout_indices < 0):
+    if np.any(m.layout_indices < 0):
         raise CorruptDatasetError(f"{path}: negative maze layout index")
 
 
@@ -113,7 +136,6 @@ def check_values(a: DatasetArrays, *, action_count: int, path: str | os.PathLike
             raise CorruptDatasetError(f"{path}: {name} outside the action space"
                                       f" Discrete({action_count})")
     _check_episode_ends(a, path)
-    if a.positions is not None or a.layouts is not None:
-        if a.positions is None or a.layouts is None:
-            raise CorruptDatasetError(f"{path}: maze positions without layouts, or the reverse")
-        _check_maze(a, path)
+    maze = maze_columns(a, path)
+    if maze is not None:
+        _check_maze(maze, path)

@@ -30,6 +30,7 @@ from abco_data.files import file_digest, sha256_of
 from abco_data.forked_call import run_in_child
 from abco_data.generate import layout_split
 from abco_data.manifest import Manifest, as_manifest, cached_path, known_ids
+from abco_data.validation import MazeColumns, maze_columns
 from abco_envs.maze.procedural import PROCEDURAL_SPLIT_SIZE
 
 __all__ = ["VerifyReport", "check_dataset", "verify", "sha256_of"]
@@ -62,7 +63,7 @@ class VerifyReport:
     checksum: str = ""
 
 
-def _split_ids(a: DatasetArrays, ds: Dataset, path: Path) -> tuple[tuple[str, ...], str]:
+def _split_ids(m: MazeColumns, ds: Dataset, path: Path) -> tuple[tuple[str, ...], str]:
     """The structural ids that ``layout_index`` indexes, and what they are, for messages."""
     from abco_envs.maze.procedural import procedural_ids
 
@@ -72,11 +73,11 @@ def _split_ids(a: DatasetArrays, ds: Dataset, path: Path) -> tuple[tuple[str, ..
         raise CorruptDatasetError(f"{path}: creation_params name no layout split a dataset"
                                   f" can be made from: {err}") from err
     if split == "procedural":
-        count = int(a.layout_indices.max()) + 1 if len(a.layout_indices) else 0
+        count = int(m.layout_indices.max()) + 1 if len(m.layout_indices) else 0
         if count > PROCEDURAL_SPLIT_SIZE:
             raise CorruptDatasetError(f"{path}: layout index {count - 1} is beyond the"
                                       f" {PROCEDURAL_SPLIT_SIZE} layouts of the procedural split")
-        return procedural_ids(a.layouts.shape[1], count), "the procedural split"
+        return procedural_ids(m.layouts.shape[1], count), "the procedural split"
     ref = ds.reference
     # Only the train split's layouts: a test layout in a dataset would leak the held-out set.
     train = tuple(i for i, split in zip(ref.layout_ids or (), ref.layout_splits or ())
@@ -84,7 +85,7 @@ def _split_ids(a: DatasetArrays, ds: Dataset, path: Path) -> tuple[tuple[str, ..
     return train, "the train split"
 
 
-def _check_maze(a: DatasetArrays, ds: Dataset, path: Path) -> int:
+def _check_maze(a: DatasetArrays, m: MazeColumns, ds: Dataset, path: Path) -> int:
     """Moves follow the walls, layouts are their split's, every frame re-renders.
 
     Returns the number of frames re-rendered.
@@ -92,28 +93,28 @@ def _check_maze(a: DatasetArrays, ds: Dataset, path: Path) -> int:
     from abco_envs.maze.layout import DELTAS, OPEN_BITS, layout_hash
     from abco_envs.maze.render import MazeRenderer
 
-    ids, where = _split_ids(a, ds, path)
-    for e, (layout, k) in enumerate(zip(a.layouts, a.layout_indices)):
+    ids, where = _split_ids(m, ds, path)
+    for e, (layout, k) in enumerate(zip(m.layouts, m.layout_indices)):
         if k >= len(ids) or layout_hash(layout) != ids[k]:
             raise CorruptDatasetError(f"{path}: episode {e}'s layout is not layout {k} of"
                                       f" {where}")
     episode_of_row = np.repeat(np.arange(len(a.episode_lengths)), a.episode_lengths + 1)
     obs_t, _ = ds.transition_index()
     actions = a.actions if a.actions is not None else a.idm_eval_actions
-    r, c = a.positions[obs_t].T
-    open_side = (a.layouts[episode_of_row[obs_t], r, c] & OPEN_BITS[actions]) > 0
-    expected = a.positions[obs_t] + DELTAS[actions] * open_side[:, None]
-    wrong = np.flatnonzero(np.any(expected != a.positions[obs_t + 1], axis=1))
+    r, c = m.positions[obs_t].T
+    open_side = (m.layouts[episode_of_row[obs_t], r, c] & OPEN_BITS[actions]) > 0
+    expected = m.positions[obs_t] + DELTAS[actions] * open_side[:, None]
+    wrong = np.flatnonzero(np.any(expected != m.positions[obs_t + 1], axis=1))
     if len(wrong):
         raise CorruptDatasetError(f"{path}: transition {int(wrong[0])} moves the agent in a way"
                                   " its action and the maze walls do not allow")
-    n = a.layouts.shape[1]
+    n = m.layouts.shape[1]
     renderer = MazeRenderer(n, *a.observations.shape[1:3])
     for e in range(len(a.episode_lengths)):
         start, stop = a.episode_starts[e], a.episode_starts[e] + a.episode_lengths[e] + 1
-        background = renderer.background(a.layouts[e])
+        background = renderer.background(m.layouts[e])
         for row in range(start, stop):
-            r, c = a.positions[row]
+            r, c = m.positions[row]
             frame = renderer.draw_agent(background.copy(), int(r), int(c))
             if not np.array_equal(frame, a.observations[row]):
                 raise CorruptDatasetError(
@@ -125,7 +126,8 @@ def _check_maze(a: DatasetArrays, ds: Dataset, path: Path) -> int:
 def _check_values(ds: Dataset) -> int:
     """Every value of ``ds`` (see the module docstring); returns the frames re-rendered."""
     a = ds.load_arrays()  # finite values, spaces, episode ends: abco_data.validation
-    return _check_maze(a, ds, ds.path) if a.positions is not None else 0
+    maze = maze_columns(a, ds.path)
+    return _check_maze(a, maze, ds, ds.path) if maze is not None else 0
 
 
 def _resolve(source: str | os.PathLike[str] | Dataset,

@@ -13,16 +13,19 @@ import numpy as np
 
 import abco_envs  # noqa: F401  (registers the ids)
 from abco_envs.experts import MazeExpert, record_episode
+from abco_envs.maze.env import MazeEnv, maze_cells
 
 
 def expert_path_image(env_id: str, seed: int, image_size: int) -> tuple[np.ndarray, dict]:
     """Roll out the expert on the layout ``reset(seed=seed)`` draws; draw its path on the maze."""
     env = gym.make(env_id, image_size=image_size)
     episode = record_episode(env, MazeExpert(seed=seed), seed=seed)
-    maze = env.unwrapped
-    image = maze.renderer.background(maze.cells)
-    maze.renderer.draw_path(image, episode.positions)
-    maze.renderer.draw_agent(image, *episode.positions[-1])
+    maze, positions = env.unwrapped, episode.positions
+    if not isinstance(maze, MazeEnv) or positions is None:
+        raise ValueError(f"{env_id} is not an abco maze")
+    image = maze.renderer.background(maze_cells(env))
+    maze.renderer.draw_path(image, positions)
+    maze.renderer.draw_agent(image, *positions[-1])
     summary = {
         "env": env_id,
         "layout_id": maze.layout_id,
@@ -35,7 +38,7 @@ def expert_path_image(env_id: str, seed: int, image_size: int) -> tuple[np.ndarr
 
 def main(argv: list[str] | None = None) -> None:
     """Command-line entry point."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--env", default="AbcoMaze10x10-v0", choices=abco_envs.MAZE_IDS)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--image-size", type=int, default=256)

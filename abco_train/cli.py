@@ -1,9 +1,11 @@
 """The ``abco`` command: ``train``, ``bench``, ``report``, ``play`` and ``data``.
 
 Every field of :class:`abco_train.config.run.RunConfig` is an option of ``abco train`` and an
-override of ``abco bench`` (``--idm-epochs 3``, ``--no-attention``, ...), generated from the
-config once (:func:`abco_train.config.run.add_config_options`); unset ones take the defaults of
-the env, preset and method.
+override of ``abco bench`` (``--batch-size 32``, ``--no-attention``, ...), generated from the
+config once (:func:`abco_train.config.run.add_config_options`); so is every option of the
+method (``abco train --method abco --help``: ``--idm-epochs 3``; ILPO's and GAIfO's carry
+their method's prefix, ``--ilpo-latents``), also settable as ``--method-options`` JSON. Unset
+ones take the defaults of the env, preset and method.
 
 This module owns the exit codes: 0 success; 2 bad input (an option, a file, a dataset, a
 plugin), printed as one ``error: ...`` line; 1 a failed operation (a grid with failed cells,
@@ -11,14 +13,16 @@ a disk error). Programming errors keep their traceback. Parsing the command line
 ``--help`` import neither torch nor the trainer.
 
 Example:
-    >>> args = build_parser().parse_args(["train", "--env", "CartPole-v1", "--idm-epochs", "3"])
-    >>> args.env, args.idm_epochs, args.method
-    ('CartPole-v1', 3, 'abco')
+    >>> argv = ["train", "--env", "CartPole-v1", "--idm-epochs", "3"]
+    >>> args = build_parser(argv).parse_args(argv)
+    >>> args.env, args.method, _option_flags(args)
+    ('CartPole-v1', 'abco', {'idm_epochs': 3})
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -47,11 +51,43 @@ def _user_errors() -> tuple[type[BaseException], ...]:
 # -- abco train ------------------------------------------------------------------------------
 
 
+#: Where the method options' flags land in the parsed namespace (apart from the run config's).
+OPTION_DEST = "method_option__"
+
+
+def _option_flags(args: argparse.Namespace) -> dict[str, Any]:
+    """``--method-options`` JSON with the method options given as flags of their own on top."""
+    flags = {k[len(OPTION_DEST):]: v for k, v in vars(args).items()
+             if k.startswith(OPTION_DEST) and v is not None}  # fmt: skip
+    return {**(args.method_options or {}), **flags}
+
+
+def _add_method_options(parser: argparse.ArgumentParser, options: Sequence[type],
+                        title: str) -> None:  # fmt: skip
+    """One group of flags per options class (each flag once, the first class's)."""
+    from dataclasses import fields
+
+    from abco_train.config.fields import add_field_options, flag_of
+
+    seen: set[str] = set()
+    for cls in dict.fromkeys(options):
+        names = [f.name for f in fields(cls)]
+        fresh = [n for n in names if flag_of(n, cls.flag_prefix) not in seen]
+        if not fresh:
+            continue
+        group = parser.add_argument_group(f"{title}: {cls.__name__} (also --method-options keys)")
+        add_field_options(group, cls, exclude=set(names) - set(fresh), unset_defaults=True,
+                          prefix=cls.flag_prefix, dest_prefix=OPTION_DEST,
+                          shown_default="per env and preset")  # fmt: skip
+        seen.update(flag_of(n, cls.flag_prefix) for n in fresh)
+
+
 def _train(args: argparse.Namespace) -> int:
     from abco_train.methods.registry import load_plugins, resolve_config
 
     load_plugins(args.plugin)
-    config = resolve_config(config_from_args(args))  # every option checked before any work
+    config = config_from_args(args, method_options=_option_flags(args))
+    config = resolve_config(config)  # every option checked before any work
     from abco_train.harness.loop import format_table, train
 
     final = train(config)
@@ -88,7 +124,7 @@ def _bench(args: argparse.Namespace) -> int:
     cells = plan(parse_list(args.envs), parse_list(args.methods), parse_seeds(args.seeds),
                  layouts)  # fmt: skip
     summary = run_grid(
-        cells, args.out, overrides=overrides, method_options=args.method_options,
+        cells, args.out, overrides=overrides, method_options=_option_flags(args),
         plugins=args.plugin, backend=args.backend, jobs=args.jobs, threads=args.threads,
         address=args.address, quiet=args.quiet,
     )  # fmt: skip
@@ -115,6 +151,54 @@ def _bench_options(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("trainer overrides (every cell; default: the trainer's)")
     add_config_options(group, exclude=("env", "method", "seed", "layouts", "run_dir", "quiet"),
                        unset_defaults=True)  # fmt: skip
+    from abco_train.methods.registry import builtin_options
+
+    _add_method_options(parser, list(builtin_options().values()),
+                        "method options (every cell whose method has them)")
+
+
+def _train_options(method: str) -> Callable[[argparse.ArgumentParser], None]:
+    """``abco train``'s options: the run config's, then ``method``'s own."""
+
+    def options(parser: argparse.ArgumentParser) -> None:
+        from abco_train.methods.registry import options_class
+
+        add_config_options(parser)
+        try:
+            cls = options_class(method)
+        except ConfigError:  # an unknown method: refused, with the list, when the run starts
+            return
+        _add_method_options(parser, [cls], f"options of --method {method}")
+
+    return options
+
+
+def _method_named(argv: Sequence[str]) -> str:
+    """The ``--method`` of a command line (the default where none is given); plugins named
+    by ``--plugin`` are imported first, so that a plugin method's options are flags too."""
+    from abco_train.config.run import RunConfig
+
+    method, plugins = RunConfig.method, []
+    for i, arg in enumerate(argv):
+        for flag in ("--method", "--plugin"):
+            value = argv[i + 1] if arg == flag and i + 1 < len(argv) else \
+                arg.split("=", 1)[1] if arg.startswith(flag + "=") else None  # fmt: skip
+            if value is not None and flag == "--method":
+                method = value
+            elif value is not None:
+                plugins.append(value)
+    if plugins and method not in _builtin_names():
+        from abco_train.methods.registry import PluginError, load_plugins
+
+        with contextlib.suppress(PluginError):  # said as one error line when the run starts
+            load_plugins(plugins)
+    return method
+
+
+def _builtin_names() -> set[str]:
+    from abco_train.methods.registry import builtin_options
+
+    return set(builtin_options())
 
 
 def _positive(text: str) -> int:
@@ -188,13 +272,18 @@ def _subcommand(sub: Any, name: str, help: str, options: Callable[[Any], None],
     parser.set_defaults(func=func)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The parser of ``abco``: ``train``, ``bench``, ``report``, ``play`` and ``data``."""
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The parser of ``abco``: ``train``, ``bench``, ``report``, ``play`` and ``data``.
+
+    Args:
+        argv: The command line to be parsed: its ``--method`` decides which method's options
+            ``abco train`` offers (default: ``abco``'s).
+    """
     parser = argparse.ArgumentParser(prog="abco", description="ABCO: imitation from observation")
     parser.add_argument("--version", action="version", version=f"abco {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _subcommand(sub, "train", "train and evaluate a method on an environment",
-                add_config_options, _train)  # fmt: skip
+                _train_options(_method_named(list(argv or []))), _train)  # fmt: skip
     _subcommand(sub, "bench", "run an (env, method, seed) grid of training runs under "
                 "OUT/{env}/{method}/seed{seed}; finished cells are skipped", _bench_options,
                 _bench)  # fmt: skip
@@ -208,7 +297,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``abco`` console script and ``python -m abco_train``."""
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(argv).parse_args(argv)
     if args.command == "data":
         from abco_data.cli import run
 

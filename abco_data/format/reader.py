@@ -355,12 +355,13 @@ class LazyH5File:
 
     def file(self) -> h5py.File:
         """The handle of this process, opened now if needed."""
-        if not self.is_open:
+        f = self._file if self.is_open else None
+        if f is None:
             # A handle inherited over a fork belongs to the parent: forget it, never close it.
             self._file, self._reader = None, None
-            self._file = open_h5_file(self.path)
+            f = self._file = open_h5_file(self.path)
             self._pid = os.getpid()
-        return self._file
+        return f
 
     def observations(self) -> ObservationReader:
         """The observations column of this process's handle (a palette decoded on read)."""

@@ -83,23 +83,23 @@ class _Column:
         if self.encoder is not None:
             indices = self.encoder.encode(block)
             if indices is None:
-                self._rewrite("raw")
+                self._rewrite(self.encoder, "raw")
             else:
                 if self.encoding == "palette4" and len(self.encoder) > MAX_COLOURS_4BIT:
-                    self._rewrite("palette")
+                    self._rewrite(self.encoder, "palette")
                 block = pack4(indices) if self.encoding == "palette4" else indices
         start = self.size
         self.ds.resize((start + len(block), *self.ds.shape[1:]))
         self.ds[start:] = block
         self.size += len(block)
 
-    def _rewrite(self, encoding: str) -> None:
+    def _rewrite(self, encoder: PaletteEncoder, encoding: str) -> None:
         """Rewrite the rows written so far in ``encoding`` (the palette outgrew the old one)."""
         data = self.ds[: self.size]
         if self.encoding == "palette4":
             data = unpack4(data)
         if encoding == "raw":
-            data = PaletteDecoder(self.encoder.palette).decode(data)
+            data = PaletteDecoder(encoder.palette).decode(data)
             self.encoder = None
         del self.group[self.name]
         self.encoding = encoding
@@ -170,8 +170,7 @@ class DatasetWriter:
         if "/" not in name:
             return self.file, name
         parent, leaf = name.rsplit("/", 1)
-        group = self.file[parent] if parent in self.file else self.file.create_group(parent)
-        return group, leaf
+        return self.file.require_group(parent), leaf
 
     def append(self, name: str, rows: np.ndarray) -> None:
         """Append rows to column ``name`` (``"group/name"`` for a column in a group)."""
@@ -218,7 +217,7 @@ class DatasetWriter:
         obs = self._columns.get(OBSERVATIONS)
         if obs is not None:
             self.attrs["observation_encoding"] = obs.encoding
-            if obs.encoding != "raw":
+            if obs.encoder is not None:  # not "raw"
                 self.write(PALETTE, obs.encoder.palette)
         for key in sorted(self.attrs):
             self.file.attrs[key] = self.attrs[key]

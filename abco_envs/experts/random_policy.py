@@ -21,7 +21,7 @@ def hold_range(hold: Any) -> tuple[int, int]:
         ValueError: Not a step count >= 1 or a pair of them with ``lo <= hi``.
     """
     def count(x: Any) -> bool:
-        return isinstance(x, (int, np.integer)) and not isinstance(x, bool) and x >= 1
+        return isinstance(x, (int, np.integer)) and not isinstance(x, bool) and bool(x >= 1)
 
     pair = (hold, hold) if count(hold) else tuple(hold) if isinstance(hold, (list, tuple)) \
         else ()

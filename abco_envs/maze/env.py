@@ -28,8 +28,8 @@ from abco_envs.maze.reset import LayoutSource
 from abco_envs.maze.rules import Action, MazeDynamics
 
 # The helpers and constants below MazeEnv stay importable from here, where they used to live.
-__all__ = ["MazeEnv", "state_observation_space", "state_features", "resolve_image_size",
-           "OBS_TYPES", "LAYOUT_SOURCES"]
+__all__ = ["MazeEnv", "maze_cells", "state_observation_space", "state_features",
+           "resolve_image_size", "OBS_TYPES", "LAYOUT_SOURCES"]
 
 
 class MazeEnv(gym.Env[np.ndarray, np.int64]):
@@ -128,10 +128,10 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start an episode; ``seed`` fixes the layout drawn and everything after it."""
         super().reset(seed=seed)
-        options = check_reset_options(options)
-        row, col = check_start(options.get("start"), self.size)
+        checked = check_reset_options(options)
+        row, col = check_start(checked.get("start"), self.size)
         drawn = self._layouts.draw(
-            self.np_random, options.get("layout"), options.get("layout_index")
+            self.np_random, checked.get("layout"), checked.get("layout_index")
         )
         self.cells, self.layout_index, self.layout_id = drawn.cells, drawn.index, drawn.layout_id
         # One maze's move table, as the batched kernel wants it: (1, n * n, 4).
@@ -223,3 +223,19 @@ class MazeEnv(gym.Env[np.ndarray, np.int64]):
         state = self.__dict__.copy()
         state["_window"] = state["_clock"] = None  # a window does not travel
         return state
+
+
+def maze_cells(env: gym.Env[Any, Any]) -> np.ndarray:
+    """The layout (cell bits) of the :class:`MazeEnv` under ``env``'s wrappers, drawn at its
+    last reset.
+
+    Raises:
+        TypeError: ``env`` is not an abco maze.
+        gymnasium.error.ResetNeeded: It was never reset.
+    """
+    maze = env.unwrapped
+    if not isinstance(maze, MazeEnv):
+        raise TypeError(f"{env} is not an abco maze")
+    if maze.cells is None:
+        raise gym.error.ResetNeeded("call reset() before asking for the maze's layout")
+    return maze.cells

@@ -22,7 +22,7 @@ Example:
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
@@ -62,7 +62,7 @@ _PLAIN_INTEGER_TYPES = frozenset(
 )
 
 
-def is_integer(value: Any) -> bool:
+def is_integer(value: Any) -> TypeGuard[int | np.integer[Any] | np.ndarray]:
     """True for a Python or numpy integer (or a 0-d integer array); False for ``bool``.
 
     Example:
@@ -112,6 +112,14 @@ def check_render_mode(render_mode: Any, render_modes: Sequence[str]) -> None:
         )
 
 
+def _is_integer_pair(value: Any) -> bool:
+    """A tuple, list or 1-d array of two integers."""
+    sequence = isinstance(value, (tuple, list)) or (
+        isinstance(value, np.ndarray) and value.ndim == 1
+    )
+    return sequence and len(value) == 2 and all(is_integer(v) for v in value)
+
+
 def resolve_image_size(image_size: Any, size: int | None = None) -> tuple[int, int]:
     """``64`` -> ``(64, 64)``; ``(h, w)`` stays as it is.
 
@@ -123,12 +131,9 @@ def resolve_image_size(image_size: Any, size: int | None = None) -> tuple[int, i
         InvalidOptionError: Anything else (a string, a pair of floats, a wrong length), a
             size below 1 pixel, or fewer than 2 pixels per cell.
     """
-    pair = isinstance(image_size, (tuple, list)) or (
-        isinstance(image_size, np.ndarray) and image_size.ndim == 1
-    )
     if is_integer(image_size):
         height = width = int(image_size)
-    elif pair and len(image_size) == 2 and all(is_integer(v) for v in image_size):
+    elif _is_integer_pair(image_size):
         height, width = (int(v) for v in image_size)
     else:
         raise InvalidOptionError(
@@ -248,7 +253,7 @@ def check_start(start: Any, size: int) -> tuple[int, int]:
         raise InvalidOptionError(
             f"reset option 'start' must be a (row, col) pair of integers, got {_describe(start)}"
         )
-    row, col = int(row), int(col)  # type: ignore[arg-type]
+    row, col = int(row), int(col)
     if not (0 <= row < size and 0 <= col < size):
         raise OptionOutOfRangeError(
             f"reset option 'start' {start!r} is outside the {size}x{size} maze"

@@ -49,11 +49,13 @@ def _per_env(value: Any, num_envs: int, single_ndim: int, name: str) -> list[Any
     A value with fewer axes than one maze's counts as given once: the option's own check
     then says what is wrong with it.
     """
+    if value is None:
+        return [None] * num_envs
     try:
-        ndim = None if value is None else np.ndim(value)
+        ndim = np.ndim(value)
     except ValueError:  # a ragged nest of sequences
         ndim = -1
-    if ndim is None or 0 <= ndim <= single_ndim:
+    if 0 <= ndim <= single_ndim:
         return [value] * num_envs
     if ndim == single_ndim + 1 and len(value) == num_envs:
         return list(value)
@@ -168,19 +170,20 @@ class MazeVectorEnv(VectorEnv):
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Reset every maze; an int ``seed`` seeds maze ``i`` with ``seed + i``."""
-        super().reset(seed=seed)
+        # The base class seeds its own generator (unused here) from an int seed only.
+        super().reset(seed=seed if isinstance(seed, int) else None)
         if seed is not None:
             seeds = [seed + i for i in range(self.num_envs)] if isinstance(seed, int) else seed
             if len(seeds) != self.num_envs:
                 raise ValueError(f"expected {self.num_envs} seeds, got {len(seeds)}")
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        options = check_reset_options(options)
-        layouts = _per_env(options.get("layout"), self.num_envs, 2, "layout")
-        indices = _per_env(options.get("layout_index"), self.num_envs, 0, "layout_index")
+        checked = check_reset_options(options)
+        layouts = _per_env(checked.get("layout"), self.num_envs, 2, "layout")
+        indices = _per_env(checked.get("layout_index"), self.num_envs, 0, "layout_index")
         # Every option is checked (and every layout drawn) before any maze resets, so a bad
         # value for one maze leaves all of them as they were.
         starts = [check_start(s, self.size)
-                  for s in _per_env(options.get("start"), self.num_envs, 1, "start")]
+                  for s in _per_env(checked.get("start"), self.num_envs, 1, "start")]
         drawn = [self._layouts.draw(rng, layout, index)
                  for rng, layout, index in zip(self._rngs, layouts, indices)]
         for i in range(self.num_envs):

@@ -18,7 +18,6 @@ evaluation (episodes never seen while training).
 from __future__ import annotations
 
 import json
-import random
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -29,7 +28,7 @@ import torch
 
 import abco_data
 import abco_envs
-from abco_train.config.run import ConfigError, RunConfig, comparable, fresh_evaluation
+from abco_train.config.run import RunConfig, fresh_evaluation
 from abco_train.harness.rollouts import rollout, score
 from abco_train.harness.run_folder import (
     CHECKPOINT,
@@ -40,12 +39,12 @@ from abco_train.harness.run_folder import (
     finished_result,
     write_atomic,
 )
+from abco_train.harness.runtime import resolve_device, seed_everything
 from abco_train.harness.training_data import TrainingData, load_training_data
 from abco_train.methods.base import Method, TrainingFailed
-from abco_train.methods.registry import get_method, resolve_config
+from abco_train.methods.registry import get_method, identity, resolve_config
 
-__all__ = ["train", "final_evaluation", "format_table", "seed_everything", "resolve_device",
-           "load_checkpoint", "fresh_set",
+__all__ = ["train", "final_evaluation", "format_table", "load_checkpoint", "fresh_set",
            "EVAL_SEED", "FINAL_SEED", "FRESH_LAYOUTS", "FRESH_SEED"]  # fmt: skip
 
 EVAL_SEED = 100_000_000
@@ -54,43 +53,6 @@ FINAL_SEED = 200_000_000
 #: same for every run and method (a constant, not the run's seed).
 FRESH_LAYOUTS = 100
 FRESH_SEED = 300_000_000
-
-
-def seed_everything(seed: int, threads: int = 2, deterministic: bool = True) -> np.random.Generator:
-    """Seed python and torch, return the run's numpy Generator (the only numpy randomness);
-    make torch's CPU kernels deterministic where cheap."""
-    random.seed(seed)
-    torch.manual_seed(seed)
-    torch.set_num_threads(threads)
-    torch.set_flush_denormal(True)
-    _deterministic_kernels(deterministic)
-    return np.random.default_rng(seed)
-
-
-def _deterministic_kernels(mode: bool) -> None:
-    """``torch.use_deterministic_algorithms(mode, warn_only=True)`` without its import of
-    ``torch._inductor`` (2.5 s of every run's start on the 2-core machine, 10 s under load),
-    which only sets the compiler's flag; abco never compiles. Falls back to the public call
-    where torch lacks the setter."""
-    setter = getattr(torch._C, "_set_deterministic_algorithms", None)
-    if setter is None:
-        torch.use_deterministic_algorithms(mode, warn_only=True)
-    else:
-        setter(mode, warn_only=True)
-
-
-def resolve_device(device: str) -> str:
-    """``auto`` -> ``cuda`` when a CUDA device is available, else ``cpu``.
-
-    Raises:
-        ConfigError: ``cuda`` asked for where torch sees no CUDA device.
-    """
-    if device == "auto":
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    if device.startswith("cuda") and not torch.cuda.is_available():
-        raise ConfigError(f"--device {device}: torch {torch.__version__} sees no CUDA device "
-                          "here; use --device cpu or auto")  # fmt: skip
-    return device
 
 
 def fresh_set(cfg: RunConfig) -> tuple[np.ndarray, abco_data.ReferenceReturns]:
@@ -147,7 +109,7 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
     run_dir.mkdir(parents=True, exist_ok=True)
     ckpt_path, metrics_path = run_dir / CHECKPOINT, run_dir / METRICS
     state = load_checkpoint(ckpt_path, cfg.device)
-    if state is not None and comparable(state["config"]) != comparable(asdict(cfg)):
+    if state is not None and identity(state["config"]) != identity(asdict(cfg)):
         raise RunFolderError(
             f"{run_dir} holds a run of another config; use another --run-dir or delete it"
         )

@@ -1,4 +1,9 @@
-"""The run's figures (matplotlib, Agg backend): metrics, IDM label distribution, maze paths."""
+"""The run's figures (matplotlib, Agg backend): metrics, IDM label distribution, maze paths.
+
+Also the figures' common ground, which ``abco report``'s plots (:mod:`abco_train.report.plots`)
+share: :func:`pyplot` (matplotlib on Agg, imported on first use), :func:`action_names` and
+:func:`save_figure`.
+"""
 
 from __future__ import annotations
 
@@ -7,12 +12,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["plot_metrics", "plot_label_distribution", "plot_maze_paths"]
+__all__ = ["plot_metrics", "plot_label_distribution", "plot_maze_paths", "pyplot",
+           "action_names", "save_figure"]  # fmt: skip
 
+#: Names of the actions by number of actions (the mazes' moves); others are numbered.
 ACTION_NAMES = {4: ["N", "S", "E", "W"]}
 
 
-def _pyplot() -> Any:
+def pyplot() -> Any:
+    """``matplotlib.pyplot`` on the Agg backend (no display needed), imported on first use."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -21,10 +29,28 @@ def _pyplot() -> Any:
     return plt
 
 
+def action_names(n_actions: int) -> list[str]:
+    """The names of ``n_actions`` actions: :data:`ACTION_NAMES`, else their numbers.
+
+    Example:
+        >>> action_names(4), action_names(3)
+        (['N', 'S', 'E', 'W'], ['0', '1', '2'])
+    """
+    return ACTION_NAMES.get(n_actions, [str(a) for a in range(n_actions)])
+
+
+def save_figure(fig: Any, path: Path) -> Path:
+    """Lay out ``fig``, write it to ``path`` (PNG, 100 dpi) and close it."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    pyplot().close(fig)
+    return path
+
+
 def plot_metrics(history: list[dict[str, Any]], path: Path) -> Path:
     """P, AER and success rate of the per-iteration evaluations, and the IDM's held-out
     accuracy (overall and per action) where the method has an IDM."""
-    plt = _pyplot()
+    plt = pyplot()
     rows = [h for h in history if "eval" in h]
     its = [h["iteration"] for h in rows]
     idm = [h for h in history if "idm_val_accuracy" in h.get("train", {})]
@@ -41,7 +67,7 @@ def plot_metrics(history: list[dict[str, Any]], path: Path) -> Path:
                 label="all")  # fmt: skip
         per_class = [h["train"].get("idm_val_class_accuracy") or [] for h in idm]
         n = max(map(len, per_class))
-        names = ACTION_NAMES.get(n, [str(a) for a in range(n)])
+        names = action_names(n)
         for c in range(n):
             ax.plot(x, [pc[c] if c < len(pc) else np.nan for pc in per_class], marker=".",
                     alpha=0.7, label=names[c])  # fmt: skip
@@ -52,18 +78,15 @@ def plot_metrics(history: list[dict[str, Any]], path: Path) -> Path:
         ax.set_ylim(0, 1.02)
         ax.legend(fontsize=7, ncol=2)
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def plot_label_distribution(
     history: list[dict[str, Any]], truth: np.ndarray, n_actions: int, path: Path
 ) -> Path:
     """The IDM's predicted action distribution on the expert data, per iteration, vs truth."""
-    plt = _pyplot()
-    names = ACTION_NAMES.get(n_actions, [str(a) for a in range(n_actions)])
+    plt = pyplot()
+    names = action_names(n_actions)
     rows = [h for h in history if h.get("label_distribution") is not None]
     fig, ax = plt.subplots(figsize=(7, 3.5))
     width = 0.8 / (len(rows) + 1)
@@ -76,10 +99,7 @@ def plot_label_distribution(
     ax.set_ylabel("share of expert transitions")
     ax.set_title("IDM labels of the expert data")
     ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def plot_maze_paths(
@@ -91,7 +111,7 @@ def plot_maze_paths(
     import abco_envs
     from abco_envs.maze.render import MazeRenderer
 
-    plt = _pyplot()
+    plt = pyplot()
     n = abco_envs.maze_size(env_id)
     pool = abco_envs.layout_pool(n).split(split) if layouts is None else np.asarray(layouts)
     renderer = MazeRenderer(n, 256, 256)
@@ -107,7 +127,4 @@ def plot_maze_paths(
         ax.set_title(f"{split} #{k}: {'goal' if ok else 'failed'} ({len(cells_path) - 1} steps)",
                      fontsize=8)  # fmt: skip
         ax.axis("off")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from abco_data.files import atomic_target
-from abco_train.config.run import comparable
+from abco_train.methods.registry import identity
 
 __all__ = ["CONFIG", "METRICS", "CHECKPOINT", "FINAL", "RunFolderError", "write_atomic",
            "read_json", "finished_result", "config_differences"]  # fmt: skip
@@ -69,11 +69,13 @@ def read_json(path: str | os.PathLike[str]) -> Any:
 
 def config_differences(run_dir: str | os.PathLike[str], config: dict[str, Any]) -> list[str]:
     """Settings in which the folder's ``config.json`` differs from ``config`` (runtime
-    settings aside); empty when they agree or the folder has no config yet."""
+    settings aside; both read as :func:`abco_train.methods.registry.identity` reads them, so
+    a folder written before a setting moved into the method's options still matches); empty
+    when they agree or the folder has no config yet."""
     path = Path(run_dir) / CONFIG
     if not path.exists():
         return []
-    had, wanted = comparable(read_json(path)), comparable(config)
+    had, wanted = identity(read_json(path)), identity(config)
     return sorted(k for k in set(had) | set(wanted) if had.get(k) != wanted.get(k))
 
 

@@ -18,23 +18,19 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from abco_train.config.run import RunConfig, env_kind
-from abco_train.harness.loop import (
-    final_evaluation,
-    load_checkpoint,
-    resolve_device,
-    seed_everything,
-)
+from abco_train.config.run import ConfigError, RunConfig, env_kind
+from abco_train.harness.loop import final_evaluation, load_checkpoint
 from abco_train.harness.run_folder import CHECKPOINT, CONFIG, RunFolderError, read_json
+from abco_train.harness.runtime import resolve_device, seed_everything
 from abco_train.harness.training_data import TrainingData, load_training_data
 from abco_train.methods.base import Method
-from abco_train.methods.registry import get_method
+from abco_train.methods.registry import config_from_record, get_method
 
 __all__ = ["Policy", "load_policy", "record_gif"]
 
@@ -92,9 +88,10 @@ def load_policy(run_dir: str | os.PathLike[str], *, device: str = "cpu", quiet: 
     run_dir = Path(run_dir)
     if not (run_dir / CONFIG).exists() or not (run_dir / CHECKPOINT).exists():
         raise RunFolderError(f"{run_dir} holds no trained run ({CONFIG} and {CHECKPOINT})")
-    values = read_json(run_dir / CONFIG)
-    known = {f.name for f in fields(RunConfig)}
-    cfg = RunConfig(**{k: v for k, v in values.items() if k in known})
+    try:
+        cfg = config_from_record(read_json(run_dir / CONFIG))
+    except (ConfigError, TypeError) as exc:
+        raise RunFolderError(f"{run_dir / CONFIG} holds no config abco can read: {exc}") from None
     cfg = cfg.replace(run_dir=str(run_dir), quiet=quiet, device=resolve_device(device))
     state = load_checkpoint(run_dir / CHECKPOINT, cfg.device)
     rng = seed_everything(cfg.seed, cfg.threads, cfg.deterministic)

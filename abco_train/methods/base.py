@@ -33,10 +33,11 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from abco_train.config.fields import MethodOptions
 from abco_train.config.run import RunConfig
 from abco_train.harness.training_data import TrainingData
 
@@ -72,9 +73,13 @@ class Method(ABC):
     evaluation runs themselves (recorded), or, for a method with ``explores = True``, runs of
     the same episodes whose actions come from :meth:`explore` (evaluation stays greedy).
 
+    A method's own settings are a dataclass of :class:`~abco_train.config.fields.MethodOptions`
+    named by :attr:`Options`; the harness resolves them (:meth:`resolve_options`: unknown keys
+    refused, values checked) and the method reads them typed from ``self.options``.
+
     Args:
-        config: The run's resolved config; method-specific options are in
-            ``config.method_options``.
+        config: The run's resolved config; the method's resolved options are in
+            ``config.method_options`` (as a dict) and ``self.options`` (typed).
         data: The run's datasets (expert states, pre-demonstrations, reference returns).
         rng: The run's seeded numpy generator; draw all randomness from it (and from torch,
             seeded by the harness) so that a seed fixes the run.
@@ -82,9 +87,13 @@ class Method(ABC):
 
     #: Post-demonstrations come from :meth:`explore` rollouts, not from the evaluation runs.
     explores: bool = False
+    #: The method's options (none by default: every ``--method-options`` key is refused).
+    Options: ClassVar[type[MethodOptions]] = MethodOptions
 
     def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
         self.config, self.data, self.rng = config, data, rng
+        #: The run's options, typed (:attr:`Options`).
+        self.options = self.resolve_options(config)
         #: Environment interactions spent so far, by kind (:data:`INTERACTION_KINDS`).
         self.interactions: dict[str, int] = dict.fromkeys(INTERACTION_KINDS, 0)
 
@@ -103,6 +112,20 @@ class Method(ABC):
     def defaults(cls, name: str) -> Mapping[str, Any]:
         """Config defaults of the method registered as ``name`` (over the env's; none here)."""
         return {}
+
+    @classmethod
+    def resolve_options(cls, config: RunConfig) -> MethodOptions:
+        """The run's options: ``config.method_options`` over the method's defaults for the
+        run (none here; a method with default tables overrides this).
+
+        Raises:
+            ConfigError: An unknown option or a value that does not fit.
+        """
+        if cls.__name__ in ("ILPO", "GAIfO") and cls.Options is MethodOptions:  # TEMPORARY
+            from types import SimpleNamespace
+
+            return SimpleNamespace(to_dict=lambda: dict(config.method_options))  # type: ignore
+        return cls.Options.resolve(config.method_options, {}, config.method)
 
     @property
     def num_iterations(self) -> int:

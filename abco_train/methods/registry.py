@@ -10,14 +10,18 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, fields
 from pathlib import Path
+from typing import Any
 
-from abco_train.config.run import ConfigError, RunConfig
+from abco_train.config.fields import MethodOptions
+from abco_train.config.run import MOVED_TO_METHOD_OPTIONS, ConfigError, RunConfig, comparable
 from abco_train.methods.base import Method
 
 __all__ = ["register", "get_method", "available", "load_plugins", "resolve_config",
-           "PluginError", "BUILTIN_MODULES"]  # fmt: skip
+           "PluginError", "BUILTIN_MODULES", "config_from_record", "identity",
+           "builtin_options", "options_class"]  # fmt: skip
 
 #: Modules whose import registers the built-in methods (imported on first lookup).
 BUILTIN_MODULES = (
@@ -69,14 +73,83 @@ def available() -> tuple[str, ...]:
     return tuple(_REGISTRY)
 
 
-def resolve_config(config: RunConfig) -> RunConfig:
-    """``config`` validated, with every default filled in, the method's own included.
+def builtin_options() -> dict[str, type[MethodOptions]]:
+    """The options class of each built-in method, read without importing torch (the command
+    line builds its flags from them)."""
+    from abco_train.methods.bco.options import VARIANTS, BCOOptions
+
+    table: dict[str, type[MethodOptions]] = {**dict.fromkeys(VARIANTS, BCOOptions),
+                                             "iupe": BCOOptions}  # fmt: skip
+    try:  # TEMPORARY until ilpo/gaifo options exist
+        from abco_train.methods.gaifo.options import GAIfOOptions
+        from abco_train.methods.ilpo.options import ILPOOptions
+
+        table.update(ilpo=ILPOOptions, gaifo=GAIfOOptions)
+    except ImportError:
+        pass
+    return table
+
+
+def options_class(name: str) -> type[MethodOptions]:
+    """The options class of the method registered as ``name`` (a built-in one without
+    importing torch; a plugin's once its plugin is loaded).
 
     Raises:
-        ConfigError: A bad setting, unknown env or unknown method.
+        ConfigError: Unknown name.
+    """
+    table = builtin_options()
+    if name in table:
+        return table[name]
+    return _REGISTRY[name].Options if name in _REGISTRY else get_method(name).Options
+
+
+def resolve_config(config: RunConfig) -> RunConfig:
+    """``config`` validated, with every default filled in, the method's own included, and
+    ``method_options`` replaced by the method's resolved options.
+
+    Raises:
+        ConfigError: A bad setting or option, unknown env or unknown method.
     """
     config.validate()
-    return config.resolved(get_method(config.method).defaults(config.method)).validate()
+    method = get_method(config.method)
+    resolved = config.resolved(method.defaults(config.method)).validate()
+    return resolved.replace(method_options=method.resolve_options(resolved).to_dict())
+
+
+def config_from_record(values: Mapping[str, Any]) -> RunConfig:
+    """A :class:`RunConfig` from a ``config.json`` of any version.
+
+    Settings that were run-config fields before they became the BCO family's options
+    (:data:`~abco_train.config.run.MOVED_TO_METHOD_OPTIONS`) are moved into
+    ``method_options`` where the method has them (``method_options`` wins) and dropped
+    where it has not (other methods never read them).
+
+    Raises:
+        ConfigError: A key that is no setting, or an unknown method.
+    """
+    values = dict(values)
+    moved = {k: values.pop(k) for k in MOVED_TO_METHOD_OPTIONS if k in values}
+    unknown = sorted(set(values) - {f.name for f in fields(RunConfig)})
+    if unknown:
+        raise ConfigError(f"unknown setting(s) {', '.join(unknown)}")
+    names = options_class(str(values.get("method", RunConfig.method))).names()
+    given = values.get("method_options") or {}
+    if not isinstance(given, dict):
+        raise ConfigError(f"method_options must be an object, got {given!r}")
+    values["method_options"] = {
+        **{k: v for k, v in moved.items() if k in names and v is not None}, **given
+    }
+    return RunConfig(**values)
+
+
+def identity(values: Mapping[str, Any]) -> dict[str, Any]:
+    """What makes a recorded run what it is: its config read with :func:`config_from_record`,
+    resolved, without the runtime fields; the record as it is where it no longer resolves
+    (an unknown method, say), so that it differs from every config that does."""
+    try:
+        return comparable(asdict(resolve_config(config_from_record(values))))
+    except (ConfigError, TypeError):
+        return comparable(values)
 
 
 def load_plugins(plugins: Sequence[str]) -> None:

@@ -175,7 +175,7 @@ def compute(scores: Scores, envs: Sequence[str], baseline: str, reps: int | None
 
 
 def _plot(agg: Aggregates, rl: SimpleNamespace, labels: Mapping[str, str], path: Path) -> Path:
-    from abco_train.report.plots import pyplot
+    from abco_train.harness.plots import pyplot, save_figure
 
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 4))
@@ -189,10 +189,7 @@ def _plot(agg: Aggregates, rl: SimpleNamespace, labels: Mapping[str, str], path:
     ax.legend(fontsize=8, loc="lower left")
     ax.set_title(f"Performance profiles over {_n_envs(agg)} envs (95% stratified bootstrap"
                  " bands)", fontsize=9)  # fmt: skip
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def _n_envs(agg: Aggregates) -> int:

@@ -2,7 +2,7 @@
 generalisation against the number of training layouts.
 
 The first two read the runs of a grid by cell: ``by_cell[(env, method)]`` is a list of
-:class:`abco_train.report.write.Run` (anything with ``metrics()`` and ``row``); the third by
+:class:`abco_train.report.runs.Run` (anything with ``metrics()`` and ``row``); the third by
 ``(env, method, layouts)``.
 """
 
@@ -14,22 +14,14 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["pyplot", "plot_performance", "plot_label_distributions", "plot_generalisation",
+from abco_train.harness.plots import action_names, pyplot, save_figure
+
+__all__ = ["plot_performance", "plot_label_distributions", "plot_generalisation",
            "GENERALISATION_PNG"]  # fmt: skip
 
 GENERALISATION_PNG = "generalisation.png"
 
 ByCell = Mapping[tuple[str, str], Sequence[Any]]
-
-
-def pyplot() -> Any:
-    """``matplotlib.pyplot`` on the Agg backend (no display needed)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _series(runs: Sequence[Any], pick: Callable[[dict[str, Any]], float | None]) -> np.ndarray:
@@ -78,10 +70,7 @@ def plot_performance(by_cell: ByCell, path: Path, env_key: Callable[[str], Any] 
     for ax in list(axes.flat)[len(envs) :]:
         ax.axis("off")
     fig.suptitle("P per iteration: mean over seeds, band = min..max across seeds", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def _share(record: dict[str, Any], action: int, n_actions: int) -> float | None:
@@ -92,8 +81,6 @@ def _share(record: dict[str, Any], action: int, n_actions: int) -> float | None:
 def plot_label_distributions(by_cell: ByCell, env: str, methods: Sequence[str], path: Path
                              ) -> Path | None:  # fmt: skip
     """The IDM's predicted action shares on the expert data per iteration (mean over seeds)."""
-    from abco_train.harness.plots import ACTION_NAMES
-
     found = [m for m in methods if (env, m) in by_cell]
     if not found:
         return None
@@ -107,7 +94,7 @@ def plot_label_distributions(by_cell: ByCell, env: str, methods: Sequence[str], 
         n_actions = max((len(d) for d in dists if d), default=0)
         truth = next((r.row.get("reference", {}).get("expert_actions") for r in runs
                       if isinstance(r.row.get("reference"), dict)), None)  # fmt: skip
-        names = ACTION_NAMES.get(n_actions, [str(a) for a in range(n_actions)])
+        names = action_names(n_actions)
         for a in range(n_actions):
             share = _series(runs, lambda rec, a=a, k=n_actions: _share(rec, a, k))
             with np.errstate(all="ignore"):
@@ -123,10 +110,7 @@ def plot_label_distributions(by_cell: ByCell, env: str, methods: Sequence[str], 
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def plot_generalisation(cells: Mapping[tuple[str, str, int | None], Sequence[Any]], path: Path,
@@ -186,7 +170,4 @@ def plot_generalisation(cells: Mapping[tuple[str, str, int | None], Sequence[Any
         row[0].set_ylim(-0.02, 1.02)
     fig.suptitle("Generalisation: test split (solid) and fresh layouts (dashed); mean over "
                  "seeds, bars = 95% bootstrap CI", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

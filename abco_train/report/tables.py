@@ -12,13 +12,13 @@ Example:
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from abco_train.bench.results_log import read_log
 from abco_train.methods.base import INTERACTION_KINDS
 from abco_train.report.runs import (
     GOALS,
@@ -28,35 +28,30 @@ from abco_train.report.runs import (
     TABLE2_ENV,
     TABLE2_METHODS,
     Grid,
-    Run,
     env_order,
     method_order,
     table_evaluation,
 )
-from abco_train.report.stats import CellStats, cell_stats
+from abco_train.report.stats import CellStats
 
 __all__ = ["table", "goals", "missing", "references", "all_runs", "wall", "seed_text",
-           "count_text", "generalisation", "generalisation_cells",
-           "GENERALISATION_SPLITS"]  # fmt: skip
-
-#: The evaluations of the generalisation table: the layouts trained on (a run on the first K
-#: procedural layouts: 100 of them; else the pool's train split), the held-out test split,
-#: and fresh layouts (in no dataset), each under the paper's protocol.
-GENERALISATION_SPLITS = ("train", "test", "fresh")
+           "count_text", "fmt", "ci_text", "stat_row"]  # fmt: skip
 
 #: Column titles of the interaction kinds.
 KIND_TITLES = {"pre_demonstration": "Pre-demo", "post_demonstration": "Post-demo", "rl": "RL",
                "remapping": "Remap"}  # fmt: skip
 
 
-def _fmt(x: float | None, digits: int = 3) -> str:
+def fmt(x: float | None, digits: int = 3) -> str:
+    """``x`` with ``digits`` decimals; ``–`` when unknown or not finite."""
     return "–" if x is None or not np.isfinite(x) else f"{x:.{digits}f}"
 
 
-def _ci(s: CellStats | None) -> str:
+def ci_text(s: CellStats | None) -> str:
+    """``mean [low, high]`` of a cell's statistics; ``missing`` without any."""
     if s is None:
         return "missing"
-    return f"{_fmt(s.mean)} [{_fmt(s.ci[0])}, {_fmt(s.ci[1])}]"
+    return f"{fmt(s.mean)} [{fmt(s.ci[0])}, {fmt(s.ci[1])}]"
 
 
 def count_text(x: float | None) -> str:
@@ -76,8 +71,9 @@ def seed_text(seeds: Sequence[int]) -> str:
     return ("seed " if len(seeds) == 1 else "seeds ") + ", ".join(parts)
 
 
-def _stat_row(table: str, env: str, method: str, evaluation: str, metric: str,
-              s: CellStats | None, paper: float | None = None) -> dict[str, Any]:  # fmt: skip
+def stat_row(table: str, env: str, method: str, evaluation: str, metric: str,
+             s: CellStats | None, paper: float | None = None) -> dict[str, Any]:  # fmt: skip
+    """One row of ``results.csv``: a statistic of a cell (empty numbers without runs)."""
     return {
         "table": table, "env": env, "method": method, "evaluation": evaluation,
         "metric": metric, "seeds": s.n if s else 0, "mean": s.mean if s else "",
@@ -111,16 +107,16 @@ def table(grid: Grid, rows: list[tuple[str, str, str, tuple[float | None, float]
                                                          else ""))  # fmt: skip
         for k, (metric, s) in enumerate((("performance", p_stats), ("aer", a_stats))):
             published = paper[k] if paper else None
-            cells += [_ci(s), _fmt(s.iqm) if s else "–"]
+            cells += [ci_text(s), fmt(s.iqm) if s else "–"]
             if paper_cols:
-                cells.append(_fmt(published))
-            csv_rows.append(_stat_row(name, env, method, evaluation, metric, s, published))
+                cells.append(fmt(published))
+            csv_rows.append(stat_row(name, env, method, evaluation, metric, s, published))
         if counts:
             for kind in INTERACTION_KINDS:
                 s = grid.interactions(env, method, kind)
                 cells.append(count_text(s.mean if s else None))
                 if s is not None:
-                    csv_rows.append(_stat_row(name, env, method, "training",
+                    csv_rows.append(stat_row(name, env, method, "training",
                                               f"interactions/{kind}", s))  # fmt: skip
         lines.append("| " + " | ".join(cells) + " |")
     return lines
@@ -145,8 +141,8 @@ def goals(grid: Grid, wall_s: float | None) -> list[str]:
         aer, perf = grid.stats(env, "abco", ev, "aer"), grid.stats(env, "abco", ev, "performance")
         goal = GOALS["aer"][env]
         stopped = sum(r.env == env and r.method == "abco" for r in grid.stopped)
-        lines.append(f"| {env} | {_ci(aer)} | {goal:.3f} | {_verdict(aer, goal, stopped)} |"
-                     f" {_ci(perf)} | {_verdict(perf, GOALS['performance'], stopped)} (goal"
+        lines.append(f"| {env} | {ci_text(aer)} | {goal:.3f} | {_verdict(aer, goal, stopped)} |"
+                     f" {ci_text(perf)} | {_verdict(perf, GOALS['performance'], stopped)} (goal"
                      f" {GOALS['performance']:.2f}) |")  # fmt: skip
     lines += ["", "IUPE and ILPO: AER at or above their published AER on every environment"
               " where one exists (GAIfO has none).", "",
@@ -159,7 +155,7 @@ def goals(grid: Grid, wall_s: float | None) -> list[str]:
                 continue
             aer = grid.stats(env, method, table_evaluation(env), "aer")
             stopped = sum(r.env == env and r.method == method for r in grid.stopped)
-            lines.append(f"| {env} | {TABLE1_METHODS.get(method, method)} | {_ci(aer)} |"
+            lines.append(f"| {env} | {TABLE1_METHODS.get(method, method)} | {ci_text(aer)} |"
                          f" {published[env]:.3f} | {_verdict(aer, published[env], stopped)} |")
     seeds = grid.seeds or [0, 1, 2, 3, 4]  # as missing() counts them
     found = {(r.env, r.method, r.seed) for r in grid.done}
@@ -262,10 +258,10 @@ def references(grid: Grid) -> list[str]:
             continue
         splits = [s for s in ("train", "test") if s in ref]
         if not splits:
-            lines.append(f"| {env} | episodes | {_fmt(ref['expert'])} | {_fmt(ref['random'])} |"
+            lines.append(f"| {env} | episodes | {fmt(ref['expert'])} | {fmt(ref['random'])} |"
                          " – |")  # fmt: skip
         for s in splits:
-            lines.append(f"| {env} | {s} | {_fmt(ref[s]['expert'])} | {_fmt(ref[s]['random'])}"
+            lines.append(f"| {env} | {s} | {fmt(ref[s]['expert'])} | {fmt(ref[s]['random'])}"
                          f" | {ref[s]['layouts']} |")  # fmt: skip
     return lines
 
@@ -283,34 +279,32 @@ def all_runs(grid: Grid, csv_rows: list[dict[str, Any]]) -> list[str]:
             for metric in ("performance", "aer", "success_rate"):
                 s = grid.stats(env, method, ev, metric)
                 if s is not None:
-                    csv_rows.append(_stat_row("all", env, method, ev, metric, s))
+                    csv_rows.append(stat_row("all", env, method, ev, metric, s))
         for kind in INTERACTION_KINDS:
             s = grid.interactions(env, method, kind)
             if s is not None:
-                csv_rows.append(_stat_row("all", env, method, "training",
+                csv_rows.append(stat_row("all", env, method, "training",
                                           f"interactions/{kind}", s))  # fmt: skip
         ev = table_evaluation(env)
         walls = [r.row["wall_s"] for r in runs if r.row.get("wall_s") is not None]
         success = grid.stats(env, method, ev, "success_rate")
         perf, aer = grid.stats(env, method, ev, "performance"), grid.stats(env, method, ev, "aer")
         lines.append(
-            f"| {env} | {method} | {len(runs)} | {_ci(perf)} | {_ci(aer)}"
-            f" | {_fmt(success.mean if success else None, 2)}"
-            f" | {_fmt(float(np.mean(walls)) if walls else None, 1)} |"
+            f"| {env} | {method} | {len(runs)} | {ci_text(perf)} | {ci_text(aer)}"
+            f" | {fmt(success.mean if success else None, 2)}"
+            f" | {fmt(float(np.mean(walls)) if walls else None, 1)} |"
         )
     return lines
 
 
 def wall(runs_dir: Path, grid: Grid) -> tuple[float | None, list[str]]:
     """The grid's wall time (``bench_log.jsonl``: sessions that ran cells) and its lines."""
-    log = runs_dir / "bench_log.jsonl"
-    sessions = ([json.loads(x) for x in log.read_text().splitlines() if x.strip()]
-                if log.exists() else [])  # fmt: skip
+    sessions = read_log(runs_dir)
     ran = [s for s in sessions if s.get("ran") or s.get("failed")]
     wall_s = float(sum(s["wall_s"] for s in ran)) if sessions else None
     cell_wall = sum(r.row.get("wall_s") or 0.0 for r in grid.done)
-    lines = [f"- Grid wall time: {_fmt(wall_s, 1) if wall_s is not None else 'unknown'} s"
-             f" ({_fmt(wall_s / 3600 if wall_s is not None else None, 2)} h) over {len(ran)}"
+    lines = [f"- Grid wall time: {fmt(wall_s, 1) if wall_s is not None else 'unknown'} s"
+             f" ({fmt(wall_s / 3600 if wall_s is not None else None, 2)} h) over {len(ran)}"
              " `abco bench` session(s) that ran cells.",
              f"- Sum of the cells' own wall times: {cell_wall:.1f} s over {len(grid.done)} cells."]
     for s in ran:
@@ -352,56 +346,4 @@ def _where_it_goes(grid: Grid, cell_wall: float) -> list[str]:
         names = ", ".join(f"{LABELS.get(m, m)} {t:,.0f}" for m, t in dearest)
         lines.append(f"| {env} | {counts[env]} | {total:,.0f} | {total / cell_wall:.0%}"
                      f" | {names} |")
-    return lines
-
-
-def generalisation_cells(runs: Sequence[Run]) -> dict[tuple[str, str, int | None], list[Run]]:
-    """The finished maze runs of the generalisation section by (env, method, layouts).
-
-    Every run on procedural layouts (``layouts`` K set), every run evaluated on fresh layouts,
-    and, beside them, the standard-data runs of the same (env, method) (``layouts`` ``None``);
-    empty when the grid has neither of the first two.
-    """
-    done = [r for r in runs if r.status == "ok" and r.final is not None]
-    special = [r for r in done if r.layouts is not None or "fresh/paper" in r.final]  # type: ignore[operator]
-    pairs = {(r.env, r.method) for r in special}
-    cells: dict[tuple[str, str, int | None], list[Run]] = {}
-    for r in done:
-        if (r.env, r.method) in pairs:
-            cells.setdefault((r.env, r.method, r.layouts), []).append(r)
-    order = {m: i for i, m in enumerate(method_order({m for _, m, _ in cells}))}
-    return dict(sorted(cells.items(), key=lambda kv: (env_order(kv[0][0]), order[kv[0][1]],
-                                                      -1 if kv[0][2] is None else kv[0][2])))
-
-
-def _layouts_text(k: int | None) -> str:
-    return "standard" if k is None else f"{k:,}"
-
-
-def generalisation(runs: Sequence[Run], csv_rows: list[dict[str, Any]]) -> list[str]:
-    """The generalisation table: per env, method and number of training layouts, P and the
-    success rate on the layouts trained on, the held-out test split and fresh layouts."""
-    cells = generalisation_cells(runs)
-    if not cells:
-        return ["No run trained on procedural layouts (`abco bench --layouts K,...`) or was"
-                " evaluated on fresh layouts (`--eval-fresh`)."]  # fmt: skip
-    head = "| Env | Method | Layouts | Seeds |" + "".join(
-        f" {s.capitalize()} P mean [95% CI] | {s.capitalize()} success |"
-        for s in GENERALISATION_SPLITS)
-    lines = [head, "|" + "---|" * head.count(" |")]
-    for (env, method, k), group in cells.items():
-        row = [env, LABELS.get(method, method), _layouts_text(k),
-               seed_text([r.seed for r in group])]
-        for split in GENERALISATION_SPLITS:
-            evaluation = f"{split}/paper"
-            stats = {}
-            for metric in ("performance", "success_rate", "aer"):
-                values = [v for r in group if (v := r.values(evaluation, metric)) is not None]
-                s = stats[metric] = cell_stats(values)
-                if s is not None:
-                    csv_rows.append({**_stat_row("generalisation", env, method, evaluation,
-                                                 metric, s), "layouts": "" if k is None else k})
-            row += [_ci(stats["performance"]) if stats["performance"] else "–",
-                    _fmt(stats["success_rate"].mean, 2) if stats["success_rate"] else "–"]
-        lines.append("| " + " | ".join(row) + " |")
     return lines

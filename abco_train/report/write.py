@@ -4,15 +4,16 @@ Writes ``report.md``, ``results.csv`` (the same numbers, one row per statistic) 
 into ``--out`` (default ``RUNS_DIR/report``). Numbers come from every
 ``RUNS_DIR/{env}/{method}/seed{seed}/final.json`` (P, AER, and the environment interactions
 each run spent); wall times, reference returns and failures from ``results.jsonl`` and
-``bench_log.jsonl`` (:mod:`abco_train.bench.grid`).
+``bench_log.jsonl`` (:mod:`abco_train.bench.results_log`).
 
 The main table (Table 1 re-measured) holds every method found: the built-ins in the order of
 :data:`ORDER`, then any other (a user's plugin) alphabetically. The runs and the tables' names
 are :mod:`abco_train.report.runs`; per-cell statistics (mean, IQM, bootstrap intervals)
 :mod:`abco_train.report.stats`; the aggregates across environments (rliable)
-:mod:`abco_train.report.aggregates`; the published numbers :mod:`abco_train.report.published`; the
-tables'
-pieces :mod:`abco_train.report.tables`; the plots :mod:`abco_train.report.plots`.
+:mod:`abco_train.report.aggregates`; the published numbers :mod:`abco_train.report.published`;
+the tables' pieces :mod:`abco_train.report.tables`; the generalisation section
+:mod:`abco_train.report.generalisation`; the plots :mod:`abco_train.report.plots`. This module
+puts them together (:func:`write_report`).
 
 Example:
     >>> table_evaluation("AbcoMaze5x5-v0", "test"), table_evaluation("CartPole-v1")
@@ -28,13 +29,8 @@ from typing import Any
 
 from abco_train.methods.base import INTERACTION_KINDS
 from abco_train.report import aggregates as aggregate
-from abco_train.report import tables as tables
-from abco_train.report.plots import (
-    GENERALISATION_PNG,
-    plot_generalisation,
-    plot_label_distributions,
-    plot_performance,
-)
+from abco_train.report import generalisation, tables
+from abco_train.report.plots import plot_label_distributions, plot_performance
 from abco_train.report.published import PAPER_TABLE2, published
 from abco_train.report.runs import (
     CSV_FIELDS,
@@ -60,6 +56,10 @@ __all__ = [
     "GOALS", "CSV_FIELDS", "MAZES", "Run", "Grid", "load_runs", "write_report",
     "table_evaluation", "method_order", "env_order", "ReportError",
 ]  # fmt: skip
+
+#: A plot of the report: its name in the returned files, its file (``None``: nothing to
+#: plot) and its caption.
+Plot = tuple[str, "Path | None", str]
 
 
 def _settings(runs: list[Run]) -> str:
@@ -96,18 +96,6 @@ def _intro(runs_dir: Path, grid: Grid) -> list[str]:
     ]  # fmt: skip
 
 
-def _generalisation_intro() -> list[str]:
-    return [
-        "Runs trained on the first K layouts of the procedural datasets (`--layouts K`), and",
-        "beside them the same methods' runs on the standard datasets (K `standard`: the",
-        "pool's 100 train layouts, 10 expert paths each). Train: the layouts trained on (the",
-        "first 100 of a procedural run's; the pool's train split for a standard run); Test:",
-        "the pool's 100 held-out test layouts; Fresh: 100 fresh layouts, in no dataset",
-        "(`abco_envs.fresh_layouts(n, 100, 300000000)`, the same for every run). Paper",
-        "protocol; P mean over seeds with its 95% bootstrap CI (seeds, then episodes); success",
-        "rate: mean over seeds.", ""]  # fmt: skip
-
-
 def write_report(runs_dir: str | Path, out: str | Path | None = None,
                  labels_env: str = TABLE2_ENV, baseline: str | None = None,
                  ) -> dict[str, Path]:  # fmt: skip
@@ -129,90 +117,117 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
             ``baseline``.
     """
     runs_dir = Path(runs_dir)
+    runs = _runs(runs_dir)
+    grid = Grid([r for r in runs if r.layouts is None])  # the paper's tables: standard data
+    every = Grid(runs)
+    baseline = _baseline(baseline, every, runs_dir)
+    out = Path(out) if out is not None else runs_dir / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    csv_rows: list[dict[str, Any]] = []
+    wall, wall_lines = tables.wall(runs_dir, every)
+    label = {m: LABELS.get(m, m) for m in every.methods + grid.main_methods}
+    gen_lines, gen_png = generalisation.section(runs, csv_rows, out, label)
+    plots: list[Plot] = [("generalisation", gen_png, generalisation.CAPTION)]
+    profile_png = None
+    if not grid.runs:  # procedural-data runs only: the generalisation section
+        md = [*_intro(runs_dir, every), "", "## Generalisation", "", *gen_lines]
+    else:
+        agg_lines, agg_rows, profile_png = aggregate.section(
+            grid.scores(grid.main_methods, TABLE1_ENVS), TABLE1_ENVS, baseline, out, label,
+            evaluation="train/paper (mazes), episodes")  # fmt: skip
+        md = [*_intro(runs_dir, grid),
+              *_paper_sections(grid, wall, agg_lines, gen_lines, label, csv_rows)]
+        csv_rows += agg_rows  # the aggregates' rows last
+        plots[:0] = _paper_plots(grid, out, labels_env)
+    md += ["", "## Wall time", "", *wall_lines, "", "## Plots", ""]
+    files: dict[str, Path] = {}
+    _plots(md, files, plots)
+    if profile_png is not None:
+        files["profile"] = profile_png
+    return _write(out, md, csv_rows, files)
+
+
+def _runs(runs_dir: Path) -> list[Run]:
+    """The runs of ``runs_dir``.
+
+    Raises:
+        ReportError: ``runs_dir`` is not a folder or holds no run folders.
+    """
     if not runs_dir.is_dir():
         raise ReportError(f"no such folder {runs_dir}")
     runs = load_runs(runs_dir)
     if not runs:
         raise ReportError(f"{runs_dir} holds no run folders ({{env}}/{{method}}/seed{{n}}); "
                           "is it an `abco bench --out` folder?")  # fmt: skip
-    grid = Grid([r for r in runs if r.layouts is None])  # the paper's tables: standard data
-    every = Grid(runs)
-    if baseline is not None and baseline not in every.methods:
+    return runs
+
+
+def _baseline(baseline: str | None, grid: Grid, runs_dir: Path) -> str:
+    """The probability of improvement's baseline: ``baseline`` (a method of the grid), or abco.
+
+    Raises:
+        ReportError: ``baseline`` is not a method of the grid.
+    """
+    if baseline is not None and baseline not in grid.methods:
         raise ReportError(f"unknown baseline {baseline!r}: not a method of {runs_dir}; methods"
-                          f" found: {', '.join(every.methods)}")  # fmt: skip
-    baseline = baseline or "abco"
-    out = Path(out) if out is not None else runs_dir / "report"
-    out.mkdir(parents=True, exist_ok=True)
-    csv_rows: list[dict[str, Any]] = []
-    wall, wall_lines = tables.wall(runs_dir, every)
+                          f" found: {', '.join(grid.methods)}")  # fmt: skip
+    return baseline or "abco"
+
+
+def _paper_sections(grid: Grid, wall: float | None, agg_lines: list[str],
+                    gen_lines: list[str], label: dict[str, str],
+                    csv_rows: list[dict[str, Any]]) -> list[str]:  # fmt: skip
+    """The sections of a grid with standard-data runs, from the goals to the reference
+    returns: the paper's tables re-measured, the aggregates (``agg_lines``), the
+    generalisation section (``gen_lines``), what is missing. Their CSV rows are appended."""
     main = grid.main_methods
-    label = {m: LABELS.get(m, m) for m in every.methods + main}
-    gen_cells = tables.generalisation_cells(runs)
-    gen_lines = [*(_generalisation_intro() if gen_cells else []),
-                 *tables.generalisation(runs, csv_rows)]
-    gen_png = plot_generalisation(gen_cells, out / GENERALISATION_PNG, label, env_order)
-    files: dict[str, Path] = {}
-    if not grid.runs:  # procedural-data runs only: the generalisation section
-        md = [*_intro(runs_dir, every), "", "## Generalisation", "", *gen_lines,
-              "", "## Wall time", "", *wall_lines, "", "## Plots", ""]  # fmt: skip
-        _plots(md, files, [("generalisation", gen_png, _GEN_CAPTION)])
-        return _write(out, md, csv_rows, files)
     t1 = [(e, m, label[m], published(m, e)) for e in TABLE1_ENVS for m in main
           if grid.has(e, m)]  # fmt: skip
     t1_test = [(e, m, label[m], None) for e in MAZES for m in main if grid.has(e, m)]
     t2 = [(TABLE2_ENV, m, lab, PAPER_TABLE2.get(m)) for m, lab in TABLE2_METHODS.items()
           if grid.has(TABLE2_ENV, m)]  # fmt: skip
     t2_test = [(e, m, lab, None) for e, m, lab, _ in t2]
-    agg_lines, agg_rows, profile_png = aggregate.section(
-        grid.scores(main, TABLE1_ENVS), TABLE1_ENVS, baseline, out, label,
-        evaluation="train/paper (mazes), episodes")  # fmt: skip
     means = {e: {m: s.mean for m in main
                  if (s := grid.stats(e, m, table_evaluation(e), "performance"))}
              for e in TABLE1_ENVS}  # fmt: skip
+    empty = ["No finished or stopped run of these cells."]
+    return [
+        "", "## Goals (mean over seeds)", "", *tables.goals(grid, wall),
+        "", "## Table 1 re-measured: every method, train split (the paper's protocol)", "",
+        *(tables.table(grid, t1, "train", csv_rows, "table1", counts=True) if t1 else empty),
+        "", f"## Aggregates across the {len(TABLE1_ENVS)} environments (rliable)", "",
+        *agg_lines, "", "## Which environments separate methods", "",
+        *aggregate.separation(means, TABLE1_ENVS, label),
+        "", "## Table 1, mazes on the held-out test split", "",
+        *(tables.table(grid, t1_test, "test", csv_rows, "table1-test") if t1_test else empty),
+        "", "## Generalisation: held-out and fresh layouts", "", *gen_lines,
+        "", "## Table 2: ablation on the 5x5 maze, train split", "",
+        *(tables.table(grid, t2, "train", csv_rows, "table2") if t2 else empty),
+        "", "Table 2's BCO row is BCO(α) (the paper's Table 2 BCO repeats Table 1's).",
+        "", "### Table 2 on the test split", "",
+        *(tables.table(grid, t2_test, "test", csv_rows, "table2-test") if t2 else empty),
+        "", "## Missing, unfinished, failed or stopped cells", "", *tables.missing(grid),
+        "", "## Every (env, method) found: success rate and wall time", "",
+        "Train split; every evaluation of every cell is in the CSV (`table` = `all`).", "",
+        *tables.all_runs(grid, csv_rows),
+        "", "## Reference returns (P = (R - random) / (expert - random))", "",
+        "Mazes normalise per layout; the means over each split's layouts are shown.", "",
+        *tables.references(grid),
+    ]  # fmt: skip
+
+
+def _paper_plots(grid: Grid, out: Path, labels_env: str) -> list[Plot]:
+    """The plots of the standard-data runs: P per iteration, the IDM's label distribution."""
     perf_png = plot_performance(grid.by_cell, out / "performance_per_iteration.png", env_order)
     labels_png = plot_label_distributions(grid.by_cell, labels_env, ("bco-alpha", "abco"),
                                           out / "idm_label_distribution.png")  # fmt: skip
-    empty = ["No finished or stopped run of these cells."]
-    md = [*_intro(runs_dir, grid),
-          "", "## Goals (mean over seeds)", "", *tables.goals(grid, wall),
-          "", "## Table 1 re-measured: every method, train split (the paper's protocol)", "",
-          *(tables.table(grid, t1, "train", csv_rows, "table1", counts=True) if t1 else empty),
-          "", f"## Aggregates across the {len(TABLE1_ENVS)} environments (rliable)", "",
-          *agg_lines, "", "## Which environments separate methods", "",
-          *aggregate.separation(means, TABLE1_ENVS, label),
-          "", "## Table 1, mazes on the held-out test split", "",
-          *(tables.table(grid, t1_test, "test", csv_rows, "table1-test") if t1_test else empty),
-          "", "## Generalisation: held-out and fresh layouts", "", *gen_lines,
-          "", "## Table 2: ablation on the 5x5 maze, train split", "",
-          *(tables.table(grid, t2, "train", csv_rows, "table2") if t2 else empty),
-          "", "Table 2's BCO row is BCO(α) (the paper's Table 2 BCO repeats Table 1's).",
-          "", "### Table 2 on the test split", "",
-          *(tables.table(grid, t2_test, "test", csv_rows, "table2-test") if t2 else empty),
-          "", "## Missing, unfinished, failed or stopped cells", "", *tables.missing(grid),
-          "", "## Every (env, method) found: success rate and wall time", "",
-          "Train split; every evaluation of every cell is in the CSV (`table` = `all`).", "",
-          *tables.all_runs(grid, csv_rows),
-          "", "## Reference returns (P = (R - random) / (expert - random))", "",
-          "Mazes normalise per layout; the means over each split's layouts are shown.", "",
-          *tables.references(grid), "", "## Wall time", "", *wall_lines,
-          "", "## Plots", ""]  # fmt: skip
-    csv_rows += agg_rows
-    _plots(md, files, [
+    return [
         ("performance", perf_png, "P per iteration (band: min..max across seeds)"),
         ("labels", labels_png, f"IDM label distribution, BCO(α) vs ABCO on {labels_env}"),
-        ("generalisation", gen_png, _GEN_CAPTION),
-    ])  # fmt: skip
-    if profile_png is not None:
-        files["profile"] = profile_png
-    return _write(out, md, csv_rows, files)
+    ]  # fmt: skip
 
 
-_GEN_CAPTION = ("Held-out success rate and P against the number of training layouts (test"
-                " split solid, fresh layouts dashed)")
-
-
-def _plots(md: list[str], files: dict[str, Path],
-           plots: list[tuple[str, Path | None, str]]) -> None:  # fmt: skip
+def _plots(md: list[str], files: dict[str, Path], plots: list[Plot]) -> None:
     """Each plot's Markdown image (or a line saying it had no runs) and its file entry."""
     for name, png, caption in plots:
         if png is None:

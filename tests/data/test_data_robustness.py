@@ -210,6 +210,14 @@ def test_non_finite_values_are_rejected(small: Path) -> None:
         abco_data.open_dataset(small).load_arrays()
 
 
+def test_a_group_in_place_of_a_column_is_corrupt(small: Path) -> None:
+    with h5py.File(small, "a") as f:
+        del f["rewards"]
+        f.create_group("rewards")
+    with pytest.raises(CorruptDatasetError, match="rewards is an HDF5 Group, not a column"):
+        abco_data.open_dataset(small)
+
+
 def test_moves_that_break_the_walls_are_rejected(small: Path) -> None:
     ds = abco_data.open_dataset(small)
     a = ds.load_arrays()

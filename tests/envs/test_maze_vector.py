@@ -51,6 +51,15 @@ def test_per_env_reset_options_and_errors():
         envs.step([0, 1, 9])
 
 
+def test_reset_takes_one_seed_per_maze():
+    envs = gym.make_vec("AbcoMaze3x3-v0", num_envs=2, vectorization_mode="vector_entry_point")
+    obs, info = envs.reset(seed=[7, None])
+    again, info_again = envs.reset(seed=[7, 8])
+    assert np.array_equal(obs[0], again[0]) and info["layout_id"][0] == info_again["layout_id"][0]
+    with pytest.raises(ValueError, match="expected 2 seeds"):
+        envs.reset(seed=[1, 2, 3])
+
+
 def test_vector_observations_are_fresh():
     envs = gym.make_vec("AbcoMaze3x3-v0", num_envs=2, vectorization_mode="vector_entry_point")
     obs, _ = envs.reset(seed=0)

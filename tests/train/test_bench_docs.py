@@ -1,4 +1,4 @@
-"""docs/benchmarking.md runs: the user's method, its ``abco bench``/``abco report`` commands."""
+"""docs/plugins.md runs: the user's method, its ``abco bench``/``abco report`` commands."""
 
 from __future__ import annotations
 
@@ -14,16 +14,18 @@ from abco_train.cli import build_parser
 from abco_train.cli import main as abco_main
 
 ROOT = Path(__file__).resolve().parents[2]
-DOC = ROOT / "docs" / "benchmarking.md"
+DOC = ROOT / "docs" / "plugins.md"
+# Every abco command shown in these pages must parse.
+COMMAND_DOCS = [ROOT / "docs" / name for name in ("plugins.md", "benchmarking.md", "training.md")]
 EXAMPLE = ROOT / "docs" / "examples" / "my_method.py"
 
 
-def _blocks(language: str) -> list[str]:
-    return re.findall(rf"^```{language}\n(.*?)^```", DOC.read_text(), re.S | re.M)
+def _blocks(language: str, doc: Path = DOC) -> list[str]:
+    return re.findall(rf"^```{language}\n(.*?)^```", doc.read_text(), re.S | re.M)
 
 
 def _commands(block: str) -> list[list[str]]:
-    return [shlex.split(line) for line in block.replace("\\\n", " ").splitlines()
+    return [shlex.split(line, comments=True) for line in block.replace("\\\n", " ").splitlines()
             if line.startswith("abco ")]  # fmt: skip
 
 
@@ -32,9 +34,10 @@ def test_documented_method_is_the_example_file() -> None:
 
 
 def test_documented_commands_parse() -> None:
-    for block in _blocks("bash"):
-        for argv in _commands(block):
-            build_parser().parse_args(argv[1:])
+    for doc in COMMAND_DOCS:
+        for block in _blocks("bash", doc):
+            for argv in _commands(block):
+                build_parser().parse_args(argv[1:])
 
 
 def test_user_method_beside_abco(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -12,6 +12,7 @@ from gymnasium import spaces
 from abco_envs.maze.layout import distances_to, generate_layout
 from abco_envs.maze.rules import DELTAS, OPEN_BITS, goal_position
 from abco_train.config.run import CELL_ARCHS, ConfigError, RunConfig
+from abco_train.methods.registry import resolve_config
 from abco_train.networks.builders import build_networks
 from abco_train.networks.cells import LOG_FLOOR, PlannedHead, ValuePlanner
 
@@ -108,4 +109,5 @@ def test_cell_weights_do_not_depend_on_the_maze_size(arch: str) -> None:
 @pytest.mark.parametrize("arch", CELL_ARCHS)
 def test_cell_networks_refuse_frame_pairs(arch: str) -> None:
     with pytest.raises(ConfigError, match=f"--arch {arch} reads a transition as one frame"):
-        RunConfig(env="AbcoMaze5x5-v0", arch=arch, idm_input="pair").validate()
+        resolve_config(RunConfig(env="AbcoMaze5x5-v0", arch=arch,
+                                 method_options={"idm_input": "pair"}))

@@ -13,7 +13,8 @@ from train_testing import tiny_config
 
 import abco_envs
 from abco_train.config.run import ConfigError
-from abco_train.harness.loop import seed_everything, train
+from abco_train.harness.loop import train
+from abco_train.harness.runtime import seed_everything
 from abco_train.harness.trained_policy import load_policy
 from abco_train.harness.training_data import load_training_data
 from abco_train.methods.base import INTERACTION_KINDS

@@ -31,6 +31,7 @@ from abco_train.harness.loop import FRESH_SEED, train
 from abco_train.harness.trained_policy import load_policy
 from abco_train.harness.training_data import TRAIN_EVAL_LAYOUTS, load_training_data
 from abco_train.methods.bco.family import TRANSPOSED_ACTIONS, _fit, transpose_batch
+from abco_train.methods.registry import config_from_record, resolve_config
 from abco_train.networks.cells import CellReadout, cell_centres
 from abco_train.report.runs import load_runs
 from abco_train.report.write import write_report
@@ -76,19 +77,22 @@ def test_layouts_selects_the_procedural_datasets() -> None:
     assert given.expert_data == "mine.hdf5"  # named datasets win
     assert given.pre_data == "abco/maze5x5-procedural-pre-v0"
     plain = RunConfig(env=ENV).resolved()  # existing runs: nothing new is set
-    assert (plain.layouts, plain.eval_fresh, plain.augment, plain.expert_data) == (None,) * 4
+    assert (plain.layouts, plain.eval_fresh, plain.expert_data) == (None,) * 3
+    assert resolve_config(plain).method_options["augment"] is None
     assert config_module.fresh_evaluation(plain) is False
     assert config_module.fresh_evaluation(given) is True
     assert config_module.fresh_evaluation(plain.replace(eval_fresh=True)) is True
 
 
 def test_the_general_preset() -> None:
-    cfg = RunConfig(env=ENV, preset="general").resolved()
-    assert (cfg.arch, cfg.augment, cfg.idm_input, cfg.attention, cfg.min_updates,
-            cfg.max_updates) == ("cellplan", "transpose", "difference", True, 1000, 1000)
+    cfg = resolve_config(RunConfig(env=ENV, preset="general"))
+    opts = cfg.method_options
+    assert (cfg.arch, opts["augment"], opts["idm_input"], cfg.attention, opts["min_updates"],
+            opts["max_updates"]) == ("cellplan", "transpose", "difference", True, 1000, 1000)
     for preset in ("cpu", "paper"):  # the existing presets' defaults do not change
-        old = RunConfig(env=ENV, preset=preset).resolved()
-        assert old.augment is None and old.min_updates is None and old.max_updates is None
+        old = resolve_config(RunConfig(env=ENV, preset=preset))
+        assert [old.method_options[k] for k in ("augment", "min_updates", "max_updates")] == \
+            [None] * 3
         assert old.arch in ("cnn", "resnet18")
 
 
@@ -108,7 +112,7 @@ def test_the_general_preset() -> None:
 ])  # fmt: skip
 def test_bad_settings_are_named(changes: dict[str, Any], message: str) -> None:
     with pytest.raises(ConfigError, match=message):
-        RunConfig(**{"env": ENV, **changes}).validate()
+        resolve_config(config_from_record({"env": ENV, **changes}))
 
 
 def test_general_preset_is_for_mazes_only() -> None:

@@ -10,7 +10,8 @@ import torch
 from train_testing import tiny_config
 
 import abco_envs
-from abco_train.harness.loop import seed_everything, train
+from abco_train.harness.loop import train
+from abco_train.harness.runtime import seed_everything
 from abco_train.harness.training_data import load_training_data
 from abco_train.methods.base import INTERACTION_KINDS, Method
 from abco_train.methods.iupe import IUPE

@@ -18,6 +18,7 @@ import abco_train
 from abco_train.cli import build_parser, main
 from abco_train.config.run import ConfigError, RunConfig
 from abco_train.harness.loop import train
+from abco_train.methods.registry import resolve_config
 
 
 def _train_args(tiny_data, env: str, run_dir: Path, *extra: str) -> list[str]:
@@ -73,7 +74,7 @@ def test_a_plugin_that_fails_to_import_is_named(tmp_path, capsys) -> None:
 
 def test_validate_names_the_option() -> None:
     with pytest.raises(ConfigError, match="--idm-epochs must be >= 1, got 0"):
-        RunConfig(idm_epochs=0).validate()
+        resolve_config(RunConfig(method_options={"idm_epochs": 0}))
 
 
 def test_help_shows_defaults_and_imports_no_torch() -> None:
@@ -222,4 +223,5 @@ def test_every_option_names_its_default_once(capsys) -> None:
         main(["bench", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "(default: 10%, at most 2,000)" in text and "%%" not in text
-    assert "self-attention in both networks (default: the method's) --idm-input" in text
+    assert "self-attention in both networks (default: the method's) --batch-size" in text
+    assert "(default: |I_pre|) --policy-epochs" in text  # a method option, its default once

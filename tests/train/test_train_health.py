@@ -15,6 +15,7 @@ from abco_train.cli import main
 from abco_train.config.run import RunConfig
 from abco_train.harness.loop import train
 from abco_train.methods.bco import family as abco_module
+from abco_train.methods.registry import resolve_config
 from abco_train.networks.builders import build_networks
 from abco_train.report import write as report
 
@@ -103,8 +104,9 @@ def test_torabi_bco_alpha_keeps_i_pre_and_adds_every_post_demonstration(tiny_dat
 
 
 def test_the_authors_regime() -> None:
-    cfg = RunConfig(env="AbcoMaze5x5-v0", regime="authors").resolved()
-    assert (cfg.pre_data, cfg.idm_epochs, cfg.policy_epochs, cfg.first_epochs_factor,
+    cfg = resolve_config(RunConfig(env="AbcoMaze5x5-v0", regime="authors"))
+    opts = cfg.method_options
+    assert (cfg.pre_data, opts["idm_epochs"], opts["policy_epochs"], opts["first_epochs_factor"],
             cfg.iterations) == ("abco/maze5x5-pre-start-v0", 1, 1, 1, 10)
     assert RunConfig(env="AbcoMaze5x5-v0").resolved().pre_data is None
     spec = abco_data.spec("abco/maze5x5-pre-start-v0")

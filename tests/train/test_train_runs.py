@@ -75,7 +75,8 @@ def test_cli_train_and_data_commands(tiny_data, tmp_path, capsys):
                  "--pre-data", pre, "--run-dir", str(tmp_path / "cli"), "--quiet"])
     out = capsys.readouterr().out
     assert code == 0 and "bco on CartPole-v1" in out and "plot metrics" in out
-    assert json.loads((tmp_path / "cli" / "config.json").read_text())["idm_epochs"] == 1
+    config = json.loads((tmp_path / "cli" / "config.json").read_text())
+    assert config["method_options"]["idm_epochs"] == 1
     assert main(["data", "list"]) == 0
     assert "abco/maze5x5-expert-v0" in capsys.readouterr().out
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import abco_data
 import abco_envs
 from abco_train.config.run import RunConfig
+from abco_train.methods.registry import config_from_record
 
 TINY = {
     "maze_expert": {"layouts": 2, "solutions_per_layout": 1, "reference_episodes": 2},
@@ -43,4 +44,4 @@ def tiny_config(env_id, method, data, run_dir, **changes) -> RunConfig:
         plots=False,
     )
     values.update(changes)
-    return RunConfig(**values)
+    return config_from_record(values)  # BCO options may be given as keywords

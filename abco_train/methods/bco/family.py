@@ -69,6 +69,7 @@ from abco_train.config.run import RunConfig, env_kind
 from abco_train.harness.rollouts import Rollouts
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method, TrainingFailed
+from abco_train.methods.bco.options import VARIANTS, BCOOptions
 from abco_train.methods.bco.sampling import sample_training_set
 from abco_train.methods.registry import register
 from abco_train.networks.builders import build_networks
@@ -88,21 +89,6 @@ MIN_JUDGED = 200
 #: Held out of ``I_pre`` by default: 10% of it, at most this many transitions.
 VALIDATION_CAP = 2_000
 
-#: Method switches: (train the IDM, attention, how I_s is built after iteration 0).
-#: ``idm_data``: "pre" = I_pre only (BCO(0)), "pos" = all post-demonstrations (BCO(alpha)),
-#: "pre+pos" = I_pre and all post-demonstrations (Torabi et al.'s BCO(alpha)),
-#: "partial" / "whole" = ABCO's sampling from winning / all runs; ``None`` = no IDM (BC).
-VARIANTS: dict[str, dict[str, Any]] = {
-    "bc": {"attention": False, "idm_data": None, "iterative": False},
-    "bco": {"attention": False, "idm_data": "pre", "iterative": False},
-    "bco-alpha": {"attention": False, "idm_data": "pos", "iterative": True},
-    "bco-alpha-torabi": {"attention": False, "idm_data": "pre+pos", "iterative": True},
-    "abco": {"attention": True, "idm_data": "partial", "iterative": True},
-    "attention": {"attention": True, "idm_data": "pos", "iterative": True},
-    "sampling-partial": {"attention": False, "idm_data": "partial", "iterative": True},
-    "sampling-whole": {"attention": False, "idm_data": "whole", "iterative": True},
-    "abco-whole": {"attention": True, "idm_data": "whole", "iterative": True},
-}
 
 
 def transpose_batch(frames: list[torch.Tensor], labels: torch.Tensor, rng: np.random.Generator
@@ -217,6 +203,14 @@ class ABCO(Method):
         """The variant's attention switch (``--attention`` overrides it)."""
         return {"attention": cls.variant(name)["attention"]}
 
+    @classmethod
+    def resolve_options(cls, config: RunConfig) -> BCOOptions:
+        """The run's :class:`~abco_train.methods.bco.options.BCOOptions`."""
+        return BCOOptions.for_run(config, config.method)
+
+    Options = BCOOptions
+    options: BCOOptions
+
     def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
         super().__init__(config, data, rng)
         variant = self.variant(config.method)
@@ -231,10 +225,10 @@ class ABCO(Method):
         if env_kind(config.env) == "maze":  # the cellnet reads the frame cell by cell
             stats["grid"] = abco_envs.maze_size(config.env)
         self.net_stats = stats
-        self.augment = config.augment == "transpose"
+        self.augment = self.options.augment == "transpose"
         self.policy, self.idm = build_networks(
             data.observation_space, data.n_actions, config.arch, bool(config.attention),
-            config.idm_input, **stats,
+            self.options.idm_input, **stats,
         )
         # Networks live on the run's device; the data stays in CPU memory and travels to the
         # device one batch at a time (a maze's frames need not fit in GPU memory).
@@ -247,7 +241,7 @@ class ABCO(Method):
         if self.idm_data is None:  # BC has no IDM to measure
             keep, held = np.arange(len(data.pre_t)), np.zeros(0, dtype=np.int64)
         else:
-            keep, held = validation_split(len(data.pre_t), config.idm_validation, config.seed)
+            keep, held = validation_split(len(data.pre_t), self.options.idm_validation, config.seed)
         self.pre_t = torch.from_numpy(data.pre_t[keep])
         self.pre_actions = torch.from_numpy(data.pre_actions[keep])
         if self.idm_data is not None:  # its IDM learns from (and is measured on) all of I_pre
@@ -264,7 +258,7 @@ class ABCO(Method):
         self.pos_actions = torch.zeros(0, dtype=torch.long)
         self.pos_runs = np.zeros(0, dtype=np.int64)
         self.pos_wins = np.zeros(0, dtype=bool)
-        size = min(len(self.pre_t), config.idm_samples or len(self.pre_t))
+        size = min(len(self.pre_t), self.options.idm_samples or len(self.pre_t))
         self.s_pre = torch.from_numpy(rng.choice(len(self.pre_t), size, replace=False))
         self.s_pos = torch.zeros(0, dtype=torch.long)
         self.labels: np.ndarray | None = None
@@ -279,9 +273,9 @@ class ABCO(Method):
     def train_iteration(self, iteration: int) -> dict[str, float]:
         """Improve the IDM on ``I_s``, label the expert pairs, clone them into the policy."""
         cfg, stats = self.config, {}
-        boost = cfg.first_epochs_factor if iteration == 0 else 1
+        boost = self.options.first_epochs_factor if iteration == 0 else 1
         # One-iteration variants get the iterative ones' whole policy budget (equal epochs).
-        units = boost if self.iterative else cfg.first_epochs_factor + cfg.iterations
+        units = boost if self.iterative else self.options.first_epochs_factor + cfg.iterations
         policy_epochs, policy_updates = self._policy_budget(units)
         expert_n = len(self.expert_t)
         true = torch.from_numpy(self.data.expert_eval_actions)
@@ -289,7 +283,8 @@ class ABCO(Method):
             labels = true
         else:
             if iteration == 0 or self.idm_data != "pre":
-                idm_epochs = self._floored(cfg.idm_epochs, len(self.s_pre) + len(self.s_pos))
+                idm_set = len(self.s_pre) + len(self.s_pos)
+                idm_epochs = self._floored(self.options.idm_epochs, idm_set)
                 stats.update(self._train_idm_checked(idm_epochs * boost, iteration))
                 stats["idm_samples"] = int(len(self.s_pre) + len(self.s_pos))
             labels = _predict(self.idm, self._expert_pairs, expert_n, device=self.device)
@@ -312,16 +307,16 @@ class ABCO(Method):
         (floored with ``min_updates``), a unit cut to ``max_updates`` updates where one makes
         more (the last epoch then stops part-way)."""
         per_epoch = -(-len(self.expert_t) // self.config.batch_size)
-        epochs = self._floored(self.config.policy_epochs, len(self.expert_t))
+        epochs = self._floored(self.options.policy_epochs, len(self.expert_t))
         per_unit = epochs * per_epoch
-        if self.config.max_updates:
-            per_unit = min(per_unit, self.config.max_updates)
+        if self.options.max_updates:
+            per_unit = min(per_unit, self.options.max_updates)
         updates = units * per_unit
         return -(-updates // max(per_epoch, 1)), updates
 
     def _floored(self, epochs: int, examples: int) -> int:
         """``epochs`` raised, with ``min_updates``, until they make that many minibatches."""
-        least = self.config.min_updates
+        least = self.options.min_updates
         if not least or not examples:
             return epochs
         per_epoch = -(-examples // self.config.batch_size)
@@ -374,7 +369,7 @@ class ABCO(Method):
     def _new_idm(self) -> None:
         _, idm = build_networks(self.data.observation_space, self.data.n_actions,
                                 self.config.arch, bool(self.config.attention),
-                                self.config.idm_input, **self.net_stats)  # fmt: skip
+                                self.options.idm_input, **self.net_stats)  # fmt: skip
         self.idm = idm.to(self.device)
         self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=self.config.lr)
 
@@ -391,7 +386,7 @@ class ABCO(Method):
                 best_state = {k: v.detach().clone() for k, v in self.idm.state_dict().items()}
             else:
                 stale += 1
-            if stale >= self.config.idm_patience:
+            if stale >= self.options.idm_patience:
                 break
         if best_state is not None:
             self.idm.load_state_dict(best_state)
@@ -449,7 +444,7 @@ class ABCO(Method):
             if len(self.s_pos) == 0:  # nothing recorded yet: keep I_pre
                 self.s_pre = torch.arange(len(self.pre_t))
             return {"pos_transitions": len(self.pos_t)}
-        size = min(len(self.pre_t), self.config.idm_samples or len(self.pre_t))
+        size = min(len(self.pre_t), self.options.idm_samples or len(self.pre_t))
         sample = sample_training_set(
             self.pre_actions.numpy(), self.pos_actions.numpy(), self.pos_runs, self.pos_wins,
             size, self.rng, mode=self.idm_data, win_rate=rollouts.win_rate,

@@ -1,0 +1,148 @@
+"""The cells of an ``abco bench`` grid: what one cell is, the command line's lists, the plan.
+
+A cell is one (env, method, seed) training run, or (env, method, layouts K, seed) in a grid
+over numbers of training layouts; its run folder is ``OUT/{env}/{method}/seed{seed}`` or
+``OUT/{env}/{method}/layouts{K}/seed{seed}`` (:meth:`Cell.run_dir`), and its path under
+``OUT`` is its key in ``results.jsonl`` (:mod:`abco_train.bench.results_log`). The grid runner
+is :mod:`abco_train.bench.grid`.
+
+Example:
+    >>> parse_seeds("0-2,7")
+    [0, 1, 2, 7]
+    >>> [c.key for c in plan(["CartPole-v1"], ["bc", "abco"], [0])]
+    ['CartPole-v1/bc/seed0', 'CartPole-v1/abco/seed0']
+    >>> [c.key for c in plan(["AbcoMaze5x5-v0"], ["bc"], [0], layouts=[100, 1000])]
+    ['AbcoMaze5x5-v0/bc/layouts100/seed0', 'AbcoMaze5x5-v0/bc/layouts1000/seed0']
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from abco_train.config.run import ConfigError
+
+__all__ = ["Cell", "CELL_FIELDS", "parse_seeds", "parse_list", "parse_layouts", "plan",
+           "cell_config"]  # fmt: skip
+
+#: Config fields the grid sets per cell (never trainer overrides).
+CELL_FIELDS = ("env", "method", "seed", "layouts", "run_dir", "quiet", "threads",
+               "method_options")  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One training run of the grid."""
+
+    env: str
+    method: str
+    seed: int
+    layouts: int | None = None
+
+    @property
+    def key(self) -> str:
+        """``env/method/seed{seed}`` (``env/method/layouts{K}/seed{seed}`` for a cell that
+        trains on the first K procedural layouts): its run folder under the grid's folder."""
+        return str(self.run_dir(Path())).replace(os.sep, "/")
+
+    def run_dir(self, out: str | os.PathLike[str]) -> Path:
+        """The cell's run folder under ``out``."""
+        folder = Path(out) / self.env / self.method
+        if self.layouts is not None:
+            folder = folder / f"layouts{self.layouts}"
+        return folder / f"seed{self.seed}"
+
+
+def parse_seeds(text: str) -> list[int]:
+    """Seeds from ``"0-4"``, ``"0,3,5"`` or mixes like ``"0-2,7"`` (order kept, no repeats).
+
+    Raises:
+        ConfigError: A malformed part or an empty range.
+    """
+    seeds: list[int] = []
+    for part in (p.strip() for p in text.split(",")):
+        if not part:
+            continue
+        lo, sep, hi = part.partition("-")
+        try:
+            first, last = (int(lo), int(hi)) if sep else (int(part), int(part))
+        except ValueError:
+            raise ConfigError(f"bad seed range {part!r}; expected e.g. 0-4 or 0,2,5") from None
+        if last < first or first < 0:
+            raise ConfigError(f"empty or negative seed range {part!r}")
+        seeds += [s for s in range(first, last + 1) if s not in seeds]
+    if not seeds:
+        raise ConfigError("no seeds given")
+    return seeds
+
+
+def parse_layouts(text: str) -> list[int]:
+    """Numbers of training layouts from ``"100,1000,10000"`` (``10k`` and ``1,000``-style
+    thousands are not accepted: plain integers, comma-separated; order kept, no repeats).
+
+    Raises:
+        ConfigError: Not a positive integer.
+    """
+    out: list[int] = []
+    for part in (p.strip() for p in text.split(",")):
+        if not part:
+            continue
+        if not part.isdigit() or int(part) < 1:
+            raise ConfigError(f"bad --layouts value {part!r}; expected positive integers such as"
+                              " 100,1000,10000")  # fmt: skip
+        if int(part) not in out:
+            out.append(int(part))
+    if not out:
+        raise ConfigError("no --layouts given")
+    return out
+
+
+def parse_list(text: str) -> list[str]:
+    """Comma-separated names, blanks dropped, order kept, no repeats."""
+    out: list[str] = []
+    for name in (p.strip() for p in text.split(",")):
+        if name and name not in out:
+            out.append(name)
+    return out
+
+
+def plan(envs: Sequence[str], methods: Sequence[str], seeds: Sequence[int],
+         layouts: Sequence[int | None] = (None,)) -> list[Cell]:  # fmt: skip
+    """Every (env, method, layouts, seed) cell, env-major; ``layouts``: numbers of training
+    layouts (``None``: the standard datasets)."""
+    return [Cell(e, m, int(s), None if k is None else int(k))
+            for e in envs for m in methods for k in layouts for s in seeds]  # fmt: skip
+
+
+def cell_config(
+    cell: Cell,
+    out: str | os.PathLike[str],
+    overrides: dict[str, Any] | None = None,
+    threads: int = 1,
+    method_options: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """The keyword arguments of the cell's :class:`abco_train.config.run.RunConfig`.
+
+    Args:
+        cell: The cell.
+        out: The grid's folder.
+        overrides: Trainer settings applied to every cell (``None`` values are dropped).
+        threads: Torch threads of the cell.
+        method_options: ``RunConfig.method_options`` of every cell.
+
+    Raises:
+        ConfigError: An override of a per-cell field (env, method, seed, run_dir, ...).
+    """
+    overrides = {k: v for k, v in (overrides or {}).items() if v is not None}
+    clash = sorted(set(overrides) & set(CELL_FIELDS))
+    if clash:
+        raise ConfigError(f"the grid sets {', '.join(clash)} per cell; not an override")
+    return {
+        **overrides, "env": cell.env, "method": cell.method, "seed": cell.seed,
+        **({"layouts": cell.layouts} if cell.layouts is not None else {}),
+        "run_dir": str(cell.run_dir(out)), "quiet": True, "threads": int(threads),
+        "method_options": dict(method_options or {}),
+    }  # fmt: skip

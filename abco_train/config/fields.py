@@ -1,0 +1,213 @@
+"""Typed settings: one machinery for the run config and every method's options.
+
+A setting is a dataclass field made by :func:`option`, carrying its help text and its checks
+(``choices``, a lower bound ``min`` (``exclusive`` or not), an upper bound ``max``). From the
+fields come the command-line options (:func:`add_field_options`: help, choices, defaults), the
+checks of a value from the command line or a JSON file (:func:`check_fields`: type, finite
+numbers, choices, bounds; one :class:`ConfigError` naming the option) and, for a method, its
+typed options (:class:`MethodOptions`: unknown keys refused, defaults filled from tables).
+
+Importing this module imports neither torch nor gymnasium.
+
+Example:
+    >>> from dataclasses import dataclass
+    >>> @dataclass
+    ... class Opts(MethodOptions):
+    ...     steps: int | None = option("training steps", min=1)
+    >>> Opts.resolve({"steps": 5}, defaults={"steps": 100}, method="demo")
+    Opts(steps=5)
+    >>> Opts.resolve({"stpes": 5}, defaults={}, method="demo")
+    Traceback (most recent call last):
+    ...
+    abco_train.config.fields.ConfigError: unknown demo option(s) stpes; known: steps
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import types
+import typing
+from collections.abc import Collection, Mapping
+from dataclasses import MISSING, Field, asdict, dataclass, field, fields
+from typing import Any, ClassVar
+
+__all__ = ["ConfigError", "option", "flag_of", "check_fields", "add_field_options",
+           "MethodOptions", "json_object"]  # fmt: skip
+
+
+class ConfigError(ValueError):
+    """A setting out of its range or choices; the message names the option and the value."""
+
+
+def option(help: str, default: Any = None, **checks: Any) -> Any:
+    """A setting: a dataclass field with its help text and checks (``choices``, ``min``,
+    ``exclusive``, ``max``) as metadata."""
+    return field(default=default, metadata={"help": help, **checks})
+
+
+def flag_of(name: str, prefix: str = "") -> str:
+    """The command-line option of a field: ``idm_epochs`` -> ``--idm-epochs``."""
+    return "--" + prefix + name.replace("_", "-")
+
+
+def base_type(hint: Any) -> Any:
+    """``int`` of ``int | None``; the type itself otherwise."""
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(hint) if a is not type(None)]
+        return args[0]
+    return typing.get_origin(hint) or hint
+
+
+def _optional(hint: Any) -> bool:
+    return type(None) in typing.get_args(hint)
+
+
+def _type_problem(value: Any, kind: Any) -> str | None:
+    """Why ``value`` is not of ``kind`` (``None`` when it is)."""
+    if kind is bool:
+        return None if isinstance(value, bool) else "must be true or false"
+    if kind is int:
+        ok = isinstance(value, int) and not isinstance(value, bool)
+        return None if ok else "must be an integer"
+    if kind is float:
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            return "must be a number"
+        return None if math.isfinite(value) else "must be a finite number"
+    if kind is str:
+        return None if isinstance(value, str) else "must be a string"
+    if kind is dict:
+        return None if isinstance(value, dict) else "must be a JSON object"
+    return None
+
+
+def check_value(f: Field[Any], hint: Any, value: Any, flag: str) -> None:
+    """Check one field's value: type, finite numbers, choices, bounds.
+
+    Raises:
+        ConfigError: The value does not fit (the message names ``flag`` and the value).
+    """
+    if value is None:
+        if _optional(hint) or f.default is None:
+            return
+        raise ConfigError(f"{flag} must be set, got null")
+    problem = _type_problem(value, base_type(hint))
+    if problem:
+        raise ConfigError(f"{flag} {problem}, got {value!r}")
+    choices, low, high = f.metadata.get("choices"), f.metadata.get("min"), f.metadata.get("max")
+    if choices is not None and value not in choices:
+        raise ConfigError(f"{flag} must be one of {', '.join(map(str, choices))}, got {value!r}")
+    if low is not None:
+        exclusive = f.metadata.get("exclusive", False)
+        if value < low or (exclusive and value == low):
+            raise ConfigError(f"{flag} must be {'>' if exclusive else '>='} {low}, got {value}")
+    if high is not None and value > high:
+        raise ConfigError(f"{flag} must be <= {high}, got {value}")
+
+
+def check_fields(obj: Any, prefix: str = "") -> None:
+    """Check every field of the dataclass instance ``obj`` (see :func:`check_value`).
+
+    Raises:
+        ConfigError: The first field that does not fit, named as its command-line option.
+    """
+    hints = typing.get_type_hints(type(obj))
+    for f in fields(obj):
+        check_value(f, hints[f.name], getattr(obj, f.name), flag_of(f.name, prefix))
+
+
+def json_object(text: str) -> dict[str, Any]:
+    """An argparse type: a JSON object (``'{"k": 1}'``)."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise argparse.ArgumentTypeError(f"not JSON: {exc}") from None
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError("expected a JSON object, e.g. '{\"k\": 1}'")
+    return value
+
+
+def add_field_options(
+    parser: argparse.ArgumentParser | Any,
+    cls: type,
+    *,
+    exclude: Collection[str] = (),
+    unset_defaults: bool = False,
+    prefix: str = "",
+    dest_prefix: str = "",
+    shown_default: str = "per env, preset and method",
+) -> None:
+    """Add one option per field of the dataclass ``cls`` to ``parser`` (or an argument group).
+
+    Args:
+        parser: The parser or argument group.
+        cls: The dataclass whose fields become options.
+        exclude: Fields left out.
+        unset_defaults: Every option defaults to ``None`` ("not set"), as for ``abco bench``'s
+            overrides; otherwise an option defaults to its field's default.
+        prefix: Put before each flag (``ilpo-`` -> ``--ilpo-latents``).
+        dest_prefix: Put before each destination in the parsed namespace.
+        shown_default: The help's words for a ``None`` default.
+    """
+    hints = typing.get_type_hints(cls)
+    for f in fields(cls):
+        if f.name in exclude:
+            continue
+        kind = base_type(hints[f.name])
+        default = None if f.default is MISSING else f.default
+        help_text = f.metadata.get("help", "")
+        if "(default:" not in help_text:  # a help text may name its default itself
+            help_text += f" (default: {shown_default if default is None else default})"
+        kwargs: dict[str, Any] = {"default": None if unset_defaults else default,
+                                  "dest": dest_prefix + f.name,
+                                  "help": help_text.replace("%", "%%")}  # fmt: skip
+        flag = flag_of(f.name, prefix)
+        if kind is bool:
+            parser.add_argument(flag, action=argparse.BooleanOptionalAction, **kwargs)
+        elif kind is dict:
+            kwargs["default"] = None if unset_defaults else {}
+            parser.add_argument(flag, type=json_object, metavar="JSON", **kwargs)
+        else:
+            choices = f.metadata.get("choices")
+            metavar = None if choices else f.name.upper()
+            parser.add_argument(flag, type=kind, choices=choices, metavar=metavar, **kwargs)
+
+
+@dataclass
+class MethodOptions:
+    """A method's own settings, typed; a subclass declares its fields with :func:`option`.
+
+    ``None`` fields are filled from the method's default tables (:meth:`resolve`); the
+    resolved options are stored in the run's ``config.json`` under ``method_options``.
+    """
+
+    #: Put before each option's flag on the command line (``ilpo-``: ``--ilpo-latents``).
+    flag_prefix: ClassVar[str] = ""
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        """The option names."""
+        return tuple(f.name for f in fields(cls))
+
+    @classmethod
+    def resolve(cls, given: Mapping[str, Any], defaults: Mapping[str, Any], method: str
+                ) -> MethodOptions:  # fmt: skip
+        """The options: ``given`` (the user's) over ``defaults``, checked.
+
+        Raises:
+            ConfigError: An unknown option (for any method) or a value that does not fit.
+        """
+        known = cls.names()
+        unknown = sorted(set(given) - set(known))
+        if unknown:
+            raise ConfigError(f"unknown {method} option(s) {', '.join(unknown)}; known: "
+                              f"{', '.join(sorted(known)) or 'none'}")  # fmt: skip
+        values = {**{k: v for k, v in defaults.items() if k in known}, **given}
+        options = cls(**values)
+        check_fields(options, cls.flag_prefix)
+        return options
+
+    def to_dict(self) -> dict[str, Any]:
+        """The options as a JSON-ready dict."""
+        return asdict(self)
