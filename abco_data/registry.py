@@ -95,8 +95,8 @@ _CLASSIC_PRE = {"transitions": 50_000, "reference_episodes": 100,
 #: (an int, or ``[lo, hi]``: a length drawn per action, see ``RandomPolicy``). One-step
 #: random torques leave Acrobot near rest, while its expert swings fast: an IDM trained on
 #: them labels ~10% of the expert's pairs "zero torque". Held torques pump energy as the
-#: expert does (docs/results/progress-issue9.md). A parameter of these datasets only, so the
-#: ``-pre-`` datasets' stored parameters (and bytes) stay as they were.
+#: expert does (docs/notes/acrobot-alpha-and-earlier-studies.md). A parameter of these
+#: datasets only, so the ``-pre-`` datasets' stored parameters (and bytes) stay as they were.
 _CLASSIC_PRE_HELD = {**_CLASSIC_PRE, "hold": 4}
 #: The environments with a held-action dataset ``abco/{name}-pre-held-v0``.
 HELD_ENVS = ("Acrobot-v1",)

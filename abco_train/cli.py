@@ -88,7 +88,8 @@ def _train(args: argparse.Namespace) -> int:
     load_plugins(args.plugin)
     config = config_from_args(args, method_options=_option_flags(args))
     config = resolve_config(config)  # every option checked before any work
-    from abco_train.harness.loop import format_table, train
+    from abco_train.harness.evaluation import format_table
+    from abco_train.harness.loop import train
 
     final = train(config)
     if final is None:

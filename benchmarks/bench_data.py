@@ -13,7 +13,7 @@ Measures, on identical episodes of 64x64 RGB maze frames (random walks in AbcoMa
   episode read once);
 - peak memory (tracemalloc) of the full read, against the raw bytes of the arrays.
 
-Goals (issue 3, made precise by issue 11): write and read at least 20x Minari's lossless mode;
+Goals: write and read at least 20x Minari's lossless mode;
 loading into memory costs at most 1.2x the raw array bytes. Figures are the best of
 ``--repeats`` runs of each side; the ratios compare runs made in the same process, minutes
 apart, so they hold up better than the absolute figures on a loaded machine.

@@ -6,7 +6,7 @@ The peer is Minigrid with ``RGBImgObsWrapper`` on an 8x8 grid with 8-pixel tiles
 
 Run: ``python benchmarks/bench_envs.py [--seconds 2] [--num-envs 256]``; ``--tiny`` runs in
 seconds (a smoke test: 0.01 s per figure, 8 envs, steps timed 64 at a time).
-Goals (issue 2): single maze env at 64x64 >= 30x Minigrid; vector env >= 500k frames/s at 256.
+Goals: single maze env at 64x64 >= 30x Minigrid; vector env >= 500k frames/s at 256.
 """
 
 from __future__ import annotations

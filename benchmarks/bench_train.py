@@ -1,6 +1,6 @@
 """Quality and speed of the trainer's CPU defaults: ABCO, one seed, each env in turn.
 
-Targets (issue 4): ABCO on ``AbcoMaze5x5-v0`` reaches P >= 0.96 on the train split within
+Targets: ABCO on ``AbcoMaze5x5-v0`` reaches P >= 0.96 on the train split within
 10 minutes of wall time; on ``CartPole-v1`` P = 1.0 within 1 minute. The other envs are
 reported. Datasets are fetched (or generated) before the clock starts, so the time is the
 training run itself: data loading into memory, every iteration, and the final evaluation.

@@ -63,7 +63,7 @@ ARCHS = ("mlp", "cnn", "resnet18", "cellnet", "cellplan")
 #: The maze networks that read the frame cell by cell (:mod:`abco_train.networks.cells`).
 CELL_ARCHS = ("cellnet", "cellplan")
 DEVICES = ("auto", "cpu", "cuda")
-#: How an IDM reads a transition (:class:`abco_train.networks.builders.IDMNet`).
+#: How an IDM reads a transition (:class:`abco_train.networks.heads.IDMNet`).
 IDM_INPUTS = ("difference", "pair")
 #: ``default``: abco's data and schedule; ``authors``: the authors' (see REGIME_DEFAULTS).
 REGIMES = ("default", "authors")

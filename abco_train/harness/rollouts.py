@@ -119,74 +119,118 @@ def rollout(
     """
     if protocol not in PROTOCOLS:
         raise ValueError(f"unknown protocol {protocol!r}; expected one of {PROTOCOLS}")
-    maze = env_kind(env_id) == "maze"
-    kwargs = dict(env_kwargs or {})
-    options: dict[str, Any] = {}
-    if maze:
-        n = abco_envs.maze_size(env_id)
-        given = layouts is not None
-        available = len(layouts) if given else len(abco_envs.layout_pool(n).split(split))
-        num = available if episodes is None else min(int(episodes), available)
-        kwargs["split"] = "train" if given else split
-        options = ({"layout": np.asarray(layouts)[:num]} if given
-                   else {"layout_index": list(range(num))})  # fmt: skip
-        options["start"] = np.zeros((num, 2), dtype=int)
-    else:
-        num = 100 if episodes is None else int(episodes)
+    num, kwargs, options = _episodes(env_id, episodes, split, env_kwargs, layouts)
     envs = make_vector_env(env_id, num, kwargs)
     obs, info = envs.reset(seed=seed, options=options or None)
-
-    returns = np.zeros(num)
-    lengths = np.zeros(num, dtype=np.int64)
-    successes = np.zeros(num, dtype=bool)
-    done = np.zeros(num, dtype=bool)
-    layout_indices = np.asarray(info["layout_index"]).copy() if maze else None
-    layout_ids = [str(x) for x in info["layout_id"]] if maze else None
-    paper = maze and protocol == "paper"
-    if maze:
-        visits = np.zeros((num, n * n), dtype=np.int64)
-        cells = info["position"][:, 0] * n + info["position"][:, 1]
-        visits[np.arange(num), cells] = 1
+    tally = _Tally.start(env_id, num, info, paper=protocol == "paper")
     first_obs = obs.copy() if record else None
-    first_pos = info["position"].copy() if maze else None
     steps: list[tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray | None]] = []
-
-    while not done.all():
-        active = np.flatnonzero(~done)
+    while not tally.done.all():
+        active = np.flatnonzero(~tally.done)
         actions = np.zeros(num, dtype=np.int64)
         actions[active] = np.asarray(act(obs[active])).reshape(-1)
         obs, rewards, terminated, truncated, info = envs.step(actions)
-        returns[active] += rewards[active]
-        lengths[active] += 1
-        ended = (terminated | truncated)[active]
-        if maze:
-            successes[active] = terminated[active]
-            pos = info["position"][active]
-            if paper:
-                cells = pos[:, 0] * n + pos[:, 1]
-                visits[active, cells] += 1
-                looped = (visits[active, cells] >= PAPER_MAX_VISITS) & ~terminated[active]
-                returns[active[looped]] = PAPER_FAIL_RETURN
-                ended |= looped
-        elif abco_envs.env_name(env_id) == "CartPole-v1":
-            successes[active] = lengths[active] >= CARTPOLE_GOAL_STEPS
-        else:
-            successes[active] = terminated[active]
-        if max_steps is not None:
-            ended |= lengths[active] >= max_steps
+        ended = tally.step(active, rewards, terminated, truncated, info, max_steps)
         steps.append((
             active,
             obs[active].copy() if record else None,
             actions[active],
-            info["position"][active].copy() if maze else None,
+            info["position"][active].copy() if tally.maze else None,
         ))  # fmt: skip
-        done[active[ended]] = True
+        tally.done[active[ended]] = True
     envs.close()
+    return _collect(tally, first_obs, steps)
 
-    out = Rollouts(returns, successes, lengths, layout_indices, layout_ids)
-    if maze:
-        out.paths = _per_run(num, first_pos, [(a, p) for a, _, _, p in steps])
-    if record:
+
+def _episodes(
+    env_id: str, episodes: int | None, split: str, env_kwargs: dict[str, Any] | None,
+    layouts: np.ndarray | None,
+) -> tuple[int, dict[str, Any], dict[str, Any]]:  # fmt: skip
+    """How many episodes, the env's arguments and the reset options of a rollout."""
+    kwargs = dict(env_kwargs or {})
+    if env_kind(env_id) != "maze":
+        return (100 if episodes is None else int(episodes)), kwargs, {}
+    n = abco_envs.maze_size(env_id)
+    given = layouts is not None
+    available = len(layouts) if given else len(abco_envs.layout_pool(n).split(split))
+    num = available if episodes is None else min(int(episodes), available)
+    kwargs["split"] = "train" if given else split
+    options: dict[str, Any] = ({"layout": np.asarray(layouts)[:num]} if given
+                               else {"layout_index": list(range(num))})  # fmt: skip
+    options["start"] = np.zeros((num, 2), dtype=int)
+    return num, kwargs, options
+
+
+@dataclass
+class _Tally:
+    """The running returns, lengths, successes and (mazes) cell visits of a batch of episodes."""
+
+    env_name: str
+    returns: np.ndarray
+    lengths: np.ndarray
+    successes: np.ndarray
+    done: np.ndarray
+    maze: bool
+    paper: bool
+    n: int = 0
+    visits: np.ndarray | None = None
+    layout_indices: np.ndarray | None = None
+    layout_ids: list[str] | None = None
+    first_pos: np.ndarray | None = None
+
+    @classmethod
+    def start(cls, env_id: str, num: int, info: dict[str, Any], paper: bool) -> _Tally:
+        """The tally after the reset that returned ``info``."""
+        maze = env_kind(env_id) == "maze"
+        tally = cls(abco_envs.env_name(env_id), np.zeros(num), np.zeros(num, dtype=np.int64),
+                    np.zeros(num, dtype=bool), np.zeros(num, dtype=bool), maze,
+                    maze and paper)  # fmt: skip
+        if maze:
+            tally.n = n = abco_envs.maze_size(env_id)
+            tally.visits = np.zeros((num, n * n), dtype=np.int64)
+            cells = info["position"][:, 0] * n + info["position"][:, 1]
+            tally.visits[np.arange(num), cells] = 1
+            tally.layout_indices = np.asarray(info["layout_index"]).copy()
+            tally.layout_ids = [str(x) for x in info["layout_id"]]
+            tally.first_pos = info["position"].copy()
+        return tally
+
+    def step(self, active: np.ndarray, rewards: np.ndarray, terminated: np.ndarray,
+             truncated: np.ndarray, info: dict[str, Any], max_steps: int | None
+             ) -> np.ndarray:  # fmt: skip
+        """Count one step of the ``active`` episodes; which of them ended."""
+        self.returns[active] += rewards[active]
+        self.lengths[active] += 1
+        ended = (terminated | truncated)[active]
+        if self.maze:
+            self.successes[active] = terminated[active]
+            if self.paper and self.visits is not None:
+                pos = info["position"][active]
+                cells = pos[:, 0] * self.n + pos[:, 1]
+                self.visits[active, cells] += 1
+                looped = (self.visits[active, cells] >= PAPER_MAX_VISITS) & ~terminated[active]
+                self.returns[active[looped]] = PAPER_FAIL_RETURN
+                ended |= looped
+        elif self.env_name == "CartPole-v1":
+            self.successes[active] = self.lengths[active] >= CARTPOLE_GOAL_STEPS
+        else:
+            self.successes[active] = terminated[active]
+        if max_steps is not None:
+            ended |= self.lengths[active] >= max_steps
+        return ended
+
+
+def _collect(tally: _Tally, first_obs: np.ndarray | None,
+             steps: list[tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray | None]]
+             ) -> Rollouts:  # fmt: skip
+    """The :class:`Rollouts` of a finished batch: per-run paths and, when recorded, the
+    observations and actions in run order."""
+    num, lengths = len(tally.returns), tally.lengths
+    out = Rollouts(tally.returns, tally.successes, lengths, tally.layout_indices,
+                   tally.layout_ids)  # fmt: skip
+    if tally.maze:
+        out.paths = _per_run(num, tally.first_pos, [(a, p) for a, _, _, p in steps])
+    if first_obs is not None:
         run_obs = _per_run(num, first_obs, [(a, o) for a, o, _, _ in steps])
         run_acts = _per_run(num, None, [(a, x) for a, _, x, _ in steps])
         starts = np.concatenate([[0], np.cumsum(lengths + 1)[:-1]])

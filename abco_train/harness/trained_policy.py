@@ -25,7 +25,8 @@ from typing import Any
 import numpy as np
 
 from abco_train.config.run import ConfigError, RunConfig, env_kind
-from abco_train.harness.loop import final_evaluation, load_checkpoint
+from abco_train.harness.checkpoint import load_checkpoint
+from abco_train.harness.evaluation import final_evaluation
 from abco_train.harness.run_folder import CHECKPOINT, CONFIG, RunFolderError, read_json
 from abco_train.harness.runtime import resolve_device, seed_everything
 from abco_train.harness.training_data import TrainingData, load_training_data

@@ -121,7 +121,7 @@ class Method(ABC):
         Raises:
             ConfigError: An unknown option or a value that does not fit.
         """
-        if cls.__name__ in ("ILPO", "GAIfO") and cls.Options is MethodOptions:  # TEMPORARY
+        if cls.__name__ == "GAIfO" and cls.Options is MethodOptions:  # TEMPORARY
             from types import SimpleNamespace
 
             return SimpleNamespace(to_dict=lambda: dict(config.method_options))  # type: ignore

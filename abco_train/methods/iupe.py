@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from abco_train.methods.bco.family import ABCO
+from abco_train.methods.bco.family import BCOFamily
 from abco_train.methods.registry import register
 
 __all__ = ["IUPE", "IUPE_VARIANT"]
@@ -39,7 +39,7 @@ IUPE_VARIANT: dict[str, Any] = {"attention": True, "idm_data": "partial", "itera
 
 
 @register("iupe")
-class IUPE(ABCO):
+class IUPE(BCOFamily):
     """ABCO(alpha) whose post-demonstrations are sampled from the policy's softmax."""
 
     explores = True

@@ -1,13 +1,14 @@
-"""Layers shared by every image network: SAGAN self-attention over a feature map and the
-frame-to-tensor conversion (:mod:`abco_train.networks.builders`,
-:mod:`abco_train.networks.cells`)."""
+"""Layers the networks share: SAGAN self-attention over a feature map, the frame-to-tensor
+conversion, and fixed standardisation of vector inputs (:mod:`abco_train.networks.encoders`,
+:mod:`abco_train.networks.cells`, and the methods' own networks)."""
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import nn
 
-__all__ = ["SelfAttention2d", "image_input"]
+__all__ = ["SelfAttention2d", "image_input", "Standardise", "standardise"]
 
 
 class SelfAttention2d(nn.Module):
@@ -55,3 +56,22 @@ def image_input(x: torch.Tensor) -> torch.Tensor:
     if x.dtype == torch.uint8:
         x = x.float().div_(255.0)
     return x.permute(0, 3, 1, 2)
+
+
+def standardise(x: torch.Tensor, mean: torch.Tensor, std: torch.Tensor) -> torch.Tensor:
+    """``(x - mean) / std`` in float32."""
+    return (x.float() - mean) / std
+
+
+class Standardise(nn.Module):
+    """``(x - mean) / std`` with fixed buffers ``mean`` and ``std`` (statistics of the data,
+    saved with the network's state)."""
+
+    def __init__(self, mean: np.ndarray, std: np.ndarray) -> None:
+        super().__init__()
+        self.register_buffer("mean", torch.as_tensor(mean, dtype=torch.float32))
+        self.register_buffer("std", torch.as_tensor(std, dtype=torch.float32))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Standardised ``x``."""
+        return standardise(x, self.mean, self.std)

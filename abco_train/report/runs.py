@@ -23,8 +23,9 @@ from typing import Any
 import numpy as np
 
 import abco_envs
-from abco_train.bench.grid import read_results
+from abco_train.bench.results_log import read_results
 from abco_train.config.run import env_kind
+from abco_train.harness.run_folder import FINAL, METRICS
 from abco_train.report.published import PAPER_TABLE1, PUBLISHED_AER
 from abco_train.report.stats import CellStats, cell_stats
 
@@ -110,7 +111,7 @@ class Run:
 
     def metrics(self) -> list[dict[str, Any]]:
         """The per-iteration records of ``metrics.jsonl``."""
-        path = self.path / "metrics.jsonl"
+        path = self.path / METRICS
         if not path.exists():
             return []
         return [json.loads(x) for x in path.read_text().splitlines() if x.strip()]
@@ -149,7 +150,7 @@ def load_runs(runs_dir: str | Path) -> list[Run]:
         layouts = _layouts_of(path.parent.name)
         if path.parent.name.startswith("layouts") and layouts is None:
             continue
-        final_path = path / "final.json"
+        final_path = path / FINAL
         final = json.loads(final_path.read_text()) if final_path.exists() else None
         method_dir = path.parent if layouts is None else path.parent.parent
         env, method, seed = method_dir.parent.name, method_dir.name, int(path.name[4:])

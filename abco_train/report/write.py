@@ -27,6 +27,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from abco_train.harness.run_folder import CONFIG
 from abco_train.methods.base import INTERACTION_KINDS
 from abco_train.report import aggregates as aggregate
 from abco_train.report import generalisation, tables
@@ -66,7 +67,7 @@ def _settings(runs: list[Run]) -> str:
     """The regime and preset of the grid's runs (from their config.json)."""
     seen: set[tuple[str, str]] = set()
     for r in runs:
-        path = r.path / "config.json"
+        path = r.path / CONFIG
         if path.exists():
             cfg = json.loads(path.read_text())
             seen.add((str(cfg.get("regime", "default")), str(cfg.get("preset", "cpu"))))

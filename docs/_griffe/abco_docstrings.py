@@ -47,6 +47,10 @@ class AbcoDocstrings(griffe.Extension):
         """Walk the package once it is loaded, when every name in it can be resolved."""
         self._walk(pkg)
 
+    def on_package_loaded(self, *, pkg: griffe.Module, **kwargs: Any) -> None:
+        """The same hook under its griffe 1 name (both rewrites are idempotent)."""
+        self._walk(pkg)
+
     def _walk(self, obj: griffe.Object) -> None:
         if obj.docstring is not None:
             text = _EXAMPLE.sub(r"\1Examples:", obj.docstring.value)

@@ -1,9 +1,11 @@
-"""GAIfO (abco_train.methods.gaifo.method): runs on every env, its discriminator, its counts, its
-seeding."""
+"""GAIfO (abco_train.methods.gaifo): runs on every env, its discriminator, its counts, its
+seeding, its options, its stable-baselines3 pieces."""
 
 from __future__ import annotations
 
+import argparse
 import json
+import subprocess
 import sys
 
 import numpy as np
@@ -12,7 +14,8 @@ import torch
 from train_testing import tiny_config
 
 import abco_envs
-from abco_train.config.run import ConfigError
+from abco_train.config.fields import add_field_options
+from abco_train.config.run import ConfigError, RunConfig
 from abco_train.harness.loop import train
 from abco_train.harness.runtime import seed_everything
 from abco_train.harness.trained_policy import load_policy
@@ -28,6 +31,11 @@ from abco_train.methods.gaifo.method import (  # noqa: E402
     REWARDS,
     GAIfO,
     reward_from_logits,
+)
+from abco_train.methods.gaifo.options import (  # noqa: E402
+    COMMON_OPTIONS,
+    GAIFO_DEFAULTS,
+    GAIfOOptions,
 )
 
 ENVS = (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
@@ -92,7 +100,7 @@ def test_discriminator_labels_expert_pairs_1_and_learner_pairs_0(env_id, tiny_da
     assert expert_logit > 0 > learner_logit  # D = P(expert) > 0.5 on expert pairs only
     assert stats["d_expert_accuracy"] == 1.0 and stats["d_learner_accuracy"] == 1.0
     for form in REWARDS:  # every reward form prefers the expert-like pairs
-        method.options["reward"] = form
+        method.options.reward = form
         assert (method.reward(expert_s, expert_s1).mean()
                 > method.reward(learner_s, learner_s1).mean())  # fmt: skip
 
@@ -151,8 +159,75 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one_and_reloads(tiny_data, tmp_p
 def test_unknown_or_bad_options_are_config_errors(tiny_data, tmp_path):
     with pytest.raises(ConfigError, match="unknown gaifo option"):
         make_method("CartPole-v1", tiny_data, tmp_path, n_step=8)
-    with pytest.raises(ConfigError, match="reward must be one of"):
+    with pytest.raises(ConfigError, match="--gaifo-reward must be one of logit, gail, log_d, "
+                                          "got 'wasserstein'"):  # fmt: skip
         make_method("CartPole-v1", tiny_data, tmp_path, reward="wasserstein")
+
+
+@pytest.mark.parametrize(("given", "message"), [
+    ({"n_steps": 0}, "--gaifo-n-steps must be >= 1, got 0"),
+    ({"batch_size": 2.5}, "--gaifo-batch-size must be an integer, got 2.5"),
+    ({"rl_steps": True}, "--gaifo-rl-steps must be an integer, got True"),
+    ({"learning_rate": 0.0}, "--gaifo-learning-rate must be > 0.0, got 0.0"),
+    ({"gamma": float("nan")}, "--gaifo-gamma must be a finite number, got nan"),
+    ({"d_lr": None}, "--gaifo-d-lr must be set, got null"),
+    ({"net_arch": 64}, "--gaifo-net-arch must be a list of integers >= 1, got 64"),
+    ({"net_arch": [64, 0]}, r"--gaifo-net-arch must be a list of integers >= 1, got \[64, 0\]"),
+])  # fmt: skip
+def test_options_are_checked_and_named_as_their_flags(given, message):
+    with pytest.raises(ConfigError, match=message):
+        GAIfOOptions.for_run(RunConfig(env="CartPole-v1", method="gaifo", method_options=given))
+
+
+def test_options_resolve_common_then_kind_then_env_then_user():
+    def run(env, **given):
+        return GAIfOOptions.for_run(RunConfig(env=env, method="gaifo", method_options=given))
+
+    assert run("Acrobot-v1").to_dict() == COMMON_OPTIONS  # every option, in the table's order
+    assert list(run("Acrobot-v1").to_dict()) == list(COMMON_OPTIONS)
+    maze = run("AbcoMaze5x5-v0")
+    assert (maze.rl_steps, maze.n_steps) == (GAIFO_DEFAULTS["maze"]["rl_steps"], 64)
+    cartpole = run("CartPole-v1")
+    assert (cartpole.rl_steps, cartpole.reward) == (50_000, "gail")
+    assert run("CartPole-v1", reward="logit", n_steps=8).reward == "logit"
+    # the defaults' lists are not shared between runs
+    run("Acrobot-v1").net_arch.append(1)
+    assert run("Acrobot-v1").net_arch == [64, 64] == COMMON_OPTIONS["net_arch"]
+
+
+def test_options_are_flags_of_their_own_with_the_gaifo_prefix():
+    parser = argparse.ArgumentParser()
+    add_field_options(parser, GAIfOOptions, unset_defaults=True, prefix=GAIfOOptions.flag_prefix)
+    args = parser.parse_args(["--gaifo-batch-size", "32", "--gaifo-reward", "log_d"])
+    assert (args.batch_size, args.reward, args.rl_steps) == (32, "log_d", None)
+    text = parser.format_help()
+    assert "--gaifo-rl-steps" in text and "--gaifo-d-batch-size" in text
+    assert " --batch-size" not in text and " --lr" not in text  # the run config's own flags
+
+
+def test_the_resolved_options_are_the_runs_method_options(tiny_data, tmp_path):
+    cfg = resolve_config(gaifo_config("CartPole-v1", tiny_data, tmp_path))
+    assert cfg.method_options == {**COMMON_OPTIONS, **GAIFO_DEFAULTS["CartPole-v1"], **TINY}
+
+
+def test_options_and_method_modules_import_without_torch_or_sb3():
+    """options.py needs neither torch nor SB3; method.py (the registry imports it) needs no SB3
+    until a run starts, and then says what to install."""
+    code = (
+        "import sys\n"
+        "import abco_train.methods.gaifo.options\n"
+        "assert 'torch' not in sys.modules and 'stable_baselines3' not in sys.modules\n"
+        "sys.modules['stable_baselines3'] = None\n"
+        "from abco_train.config.run import ConfigError\n"
+        "from abco_train.methods.gaifo.method import GAIfO\n"
+        "try:\n"
+        "    GAIfO.defaults('gaifo')\n"
+        "except ConfigError as exc:\n"
+        "    print(exc)\n"
+    )  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout  # fmt: skip
+    assert 'pip install "abco[rl]"' in out
 
 
 def test_without_stable_baselines3_the_error_says_what_to_install(tiny_data, tmp_path,

@@ -27,10 +27,11 @@ from abco_train.bench import grid as bench
 from abco_train.cli import main as abco_main
 from abco_train.config import run as config_module
 from abco_train.config.run import ConfigError, RunConfig
-from abco_train.harness.loop import FRESH_SEED, train
+from abco_train.harness.evaluation import FRESH_SEED
+from abco_train.harness.loop import train
 from abco_train.harness.trained_policy import load_policy
 from abco_train.harness.training_data import TRAIN_EVAL_LAYOUTS, load_training_data
-from abco_train.methods.bco.family import TRANSPOSED_ACTIONS, _fit, transpose_batch
+from abco_train.methods.bco.fitting import TRANSPOSED_ACTIONS, fit, transpose_batch
 from abco_train.methods.registry import config_from_record, resolve_config
 from abco_train.networks.cells import CellReadout, cell_centres
 from abco_train.report.runs import load_runs
@@ -299,9 +300,9 @@ def test_fit_stops_after_max_batches() -> None:
     opt = torch.optim.SGD(net.parameters(), lr=0.1)
     opt.register_step_post_hook(lambda *_: steps.append(1))
     x, y = torch.randn(10, 3), torch.randint(0, 2, (10,))
-    _fit(net, opt, lambda idx: (x[idx],), y, 3, 4, np.random.default_rng(0), max_batches=5)
+    fit(net, opt, lambda idx: (x[idx],), y, 3, 4, np.random.default_rng(0), max_batches=5)
     assert len(steps) == 5  # 3 epochs of 3 batches would be 9
-    _fit(net, opt, lambda idx: (x[idx],), y, 2, 4, np.random.default_rng(0))
+    fit(net, opt, lambda idx: (x[idx],), y, 2, 4, np.random.default_rng(0))
     assert len(steps) == 5 + 6
 
 
@@ -310,7 +311,8 @@ def test_general_preset_trains_both_networks(procedural, tmp_path) -> None:
                           min_updates=1))  # fmt: skip
     assert final["status"] == "ok" and "fresh/paper" in final
     config = json.loads((tmp_path / "run" / "config.json").read_text())
-    assert (config["arch"], config["augment"], config["layouts"]) == ("cellplan", "transpose", 5)
+    assert (config["arch"], config["method_options"]["augment"], config["layouts"]) == \
+        ("cellplan", "transpose", 5)
 
 
 # -- the grid and the report ---------------------------------------------------------------------

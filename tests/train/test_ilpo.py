@@ -1,8 +1,10 @@
-"""ILPO (issue 12): the min-over-latents loss, remapping counted, every env, same seed same run."""
+"""ILPO: the min-over-latents loss, remapping counted, every env, same seed same run."""
 
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import gymnasium as gym
 import numpy as np
@@ -11,7 +13,7 @@ import torch
 from train_testing import tiny_config
 
 import abco_envs
-from abco_train.config.run import ConfigError
+from abco_train.config.run import ConfigError, RunConfig
 from abco_train.harness.loop import train
 from abco_train.harness.runtime import seed_everything
 from abco_train.harness.training_data import load_training_data
@@ -23,6 +25,7 @@ from abco_train.methods.ilpo.method import (
     expected_prediction_loss,
     min_over_latents_loss,
 )
+from abco_train.methods.ilpo.options import OPTION_DEFAULTS, ILPOOptions
 from abco_train.methods.registry import available, resolve_config
 
 ENVS = (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
@@ -156,19 +159,48 @@ def test_ilpo_options(tiny_data, tmp_path):
     cfg = resolve_config(_config("Acrobot-v1", tiny_data, tmp_path))
     data = load_training_data(cfg)
     method = ILPO(cfg, data, seed_everything(0))
+    assert isinstance(method.options, ILPOOptions)
     assert method.k == data.n_actions == 3  # default: as many latents as actions
-    assert method.opts["remap_margin"] == 0.1  # classic control: only clearly explained steps
+    assert method.options.remap_margin == 0.1  # classic control: only clearly explained steps
     assert method.interactions["pre_demonstration"] == 0
     # Acrobot's own default on top of classic control's (CartPole keeps 500 steps a round)
-    assert ILPO.options(cfg.replace(method_options={}), 3)["remap_steps"] == 1000
+    assert ILPO.resolve_options(cfg.replace(method_options={})).remap_steps == 1000
     cartpole = resolve_config(_config("CartPole-v1", tiny_data, tmp_path))
-    assert ILPO.options(cartpole.replace(method_options={}), 2)["remap_steps"] == 500
+    assert ILPO.resolve_options(cartpole.replace(method_options={})).remap_steps == 500
     cfg.method_options["latents"] = 5
     assert ILPO(cfg, data, seed_everything(0)).k == 5
-    for bad in ({"latent": 3}, {"latents": 1}, {"remap": "nearest"}, {"remap_epsilon": 2.0},
-                {"target": "cells"}):  # cells: mazes only
-        with pytest.raises(ConfigError, match="ilpo option"):
+    for bad, message in (
+        ({"latent": 3}, "unknown ilpo option"),
+        ({"latents": 1}, "--ilpo-latents must be >= 2, got 1"),
+        ({"latents": True}, "--ilpo-latents must be an integer"),
+        ({"remap": "nearest"}, "--ilpo-remap must be one of state, table"),
+        ({"remap_epsilon": 2.0}, "--ilpo-remap-epsilon must be <= 1.0, got 2.0"),
+        ({"remap_margin": 0.0}, "--ilpo-remap-margin must be > 0.0"),
+        ({"hidden": None}, "--ilpo-hidden must be set, got null"),
+        ({"target": "cells"}, "--ilpo-target cells is for maze"),  # cells: mazes only
+    ):
+        with pytest.raises(ConfigError, match=message):
             ILPO(cfg.replace(method_options=bad), data, seed_everything(0))
+
+
+def test_resolved_options_are_the_whole_table():
+    """The run's config holds every option resolved: the env's action count for ``latents``,
+    ``4 n^2`` for a maze's ``remap_max_steps``, and the env's own defaults."""
+    options = ILPOOptions.for_run(RunConfig(env="AbcoMaze3x3-v0"))
+    assert set(options.to_dict()) == set(OPTION_DEFAULTS["maze"])
+    assert (options.latents, options.remap_max_steps, options.pool) == (4, 36, 8)
+    ten = ILPOOptions.for_run(RunConfig(env="AbcoMaze10x10-v0", method_options={"latents": 6}))
+    assert (ten.latents, ten.target, ten.remap, ten.remap_max_steps) == (6, "cells", "table", 400)
+    classic = ILPOOptions.for_run(RunConfig(env="MountainCar-v0"))
+    assert (classic.latents, classic.remap_max_steps, classic.policy_steps) == (3, None, None)
+
+
+def test_the_options_module_imports_no_torch():
+    code = ("import sys, abco_train.methods.ilpo.options as o; "
+            "assert 'torch' not in sys.modules; print(o.ILPOOptions.flag_prefix)")  # fmt: skip
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "ilpo-"
 
 
 def test_act_is_the_remapped_argmax_latent(tiny_data, tmp_path):
@@ -179,10 +211,10 @@ def test_act_is_the_remapped_argmax_latent(tiny_data, tmp_path):
     with torch.no_grad():  # a latent policy that always picks latent 1
         head.weight.zero_()
         head.bias.copy_(torch.tensor([0.0, 5.0]))
-    method.remap_counts[:] = [[0, 3], [7, 1]]  # latent 1 is mostly action 0
+    method.remapping.counts[:] = [[0, 3], [7, 1]]  # latent 1 is mostly action 0
     obs = np.zeros((6, 4), dtype=np.float32)
     assert (method.act(obs) == 0).all()
-    method.remap_counts[:] = [[0, 3], [1, 7]]
+    method.remapping.counts[:] = [[0, 3], [1, 7]]
     assert (method.act(obs) == 1).all()
 
 
@@ -199,10 +231,10 @@ def test_policy_steps_defaults_and_checks(tiny_data, tmp_path):
     cfg = resolve_config(_config("AbcoMaze5x5-v0", tiny_data, tmp_path))
     data = load_training_data(cfg)
     cfg.method_options.pop("policy_steps")
-    assert ILPO(cfg, data, seed_everything(0)).opts["policy_steps"] == 1000  # mazes: in turn
-    assert _method("Acrobot-v1", tiny_data, tmp_path).opts["policy_steps"] is None  # joint
+    assert ILPO(cfg, data, seed_everything(0)).options.policy_steps == 1000  # mazes: in turn
+    assert _method("Acrobot-v1", tiny_data, tmp_path).options.policy_steps is None  # joint
     for bad in (0, -3, 2.5, True, "10"):
-        with pytest.raises(ConfigError, match="policy_steps"):
+        with pytest.raises(ConfigError, match="--ilpo-policy-steps"):
             ILPO(cfg.replace(method_options={"policy_steps": bad}), data, seed_everything(0))
 
 
@@ -248,7 +280,7 @@ def test_policy_action_accuracy_scores_what_act_does(tiny_data, tmp_path):
     with torch.no_grad():  # a broken latent policy: latent 1 in every state
         head.weight.zero_()
         head.bias.copy_(torch.tensor([0.0, 5.0]))
-    method.remap_counts[:] = [[9, 0], [0, 9]]  # latent 0 is action 0, latent 1 action 1
+    method.remapping.counts[:] = [[9, 0], [0, 9]]  # latent 0 is action 0, latent 1 action 1
     stats = method._expert_statistics()
     s = method.expert_obs[method.expert_t].numpy()
     truth = method.data.expert_eval_actions
@@ -311,7 +343,7 @@ def test_the_cell_target_is_one_pattern_for_a_move_anywhere(tiny_data, tmp_path)
     a move into the red goal cell changes the same two cells (the goal's by less)."""
     cfg = resolve_config(_config("AbcoMaze10x10-v0", tiny_data, tmp_path))
     method = ILPO(cfg, load_training_data(cfg), seed_everything(0))
-    assert method.opts["target"] == "cells" and method.expert_targets.shape[1] == 100
+    assert method.options.target == "cells" and method.expert_targets.shape[1] == 100
     env = gym.make("AbcoMaze10x10-v0")
     env.reset(seed=0)
     maze = env.unwrapped

@@ -60,6 +60,7 @@ def test_bc_counts_nothing_and_bco_only_its_pre_demonstrations(tiny_data, tmp_pa
 
 def test_count_rejects_an_unknown_kind(tiny_data, tmp_path):
     cfg = resolve_config(tiny_config("CartPole-v1", "bc", tiny_data, tmp_path))
+    cfg = cfg.replace(method_options={})  # the probe below has no options
 
     class Probe(Method):
         def train_iteration(self, iteration):

@@ -15,6 +15,7 @@ from abco_train.cli import main
 from abco_train.config.run import RunConfig
 from abco_train.harness.loop import train
 from abco_train.methods.bco import family as abco_module
+from abco_train.methods.bco.fitting import validation_split
 from abco_train.methods.registry import resolve_config
 from abco_train.networks.builders import build_networks
 from abco_train.report import write as report
@@ -25,12 +26,12 @@ def _metrics(run_dir) -> list[dict]:
 
 
 def test_validation_split_is_fixed_and_disjoint() -> None:
-    a_train, a_held = abco_module.validation_split(5_000, None, seed=3)
-    b_train, b_held = abco_module.validation_split(5_000, None, seed=3)
+    a_train, a_held = validation_split(5_000, None, seed=3)
+    b_train, b_held = validation_split(5_000, None, seed=3)
     assert np.array_equal(a_held, b_held) and len(a_held) == 500
     assert len(np.intersect1d(a_train, a_held)) == 0 and len(a_train) + len(a_held) == 5_000
-    assert len(abco_module.validation_split(100_000, None, seed=0)[1]) == 2_000  # the cap
-    assert not np.array_equal(abco_module.validation_split(5_000, None, seed=4)[1], a_held)
+    assert len(validation_split(100_000, None, seed=0)[1]) == 2_000  # the cap
+    assert not np.array_equal(validation_split(5_000, None, seed=4)[1], a_held)
 
 
 def test_every_iteration_logs_the_idm_held_out_accuracy(tiny_data, tmp_path) -> None:
@@ -45,7 +46,7 @@ def test_every_iteration_logs_the_idm_held_out_accuracy(tiny_data, tmp_path) -> 
 
 
 def test_idm_stops_when_held_out_accuracy_stops_improving(tiny_data, tmp_path, monkeypatch):
-    monkeypatch.setattr(abco_module.ABCO, "validate_idm",
+    monkeypatch.setattr(abco_module.BCOFamily, "validate_idm",
                         lambda self: {"accuracy": 0.9, "class_accuracy": [0.9, 0.9]})
     train(tiny_config("CartPole-v1", "bco", tiny_data, tmp_path / "run", idm_epochs=6,
                       idm_patience=2))  # fmt: skip
@@ -60,7 +61,7 @@ def test_an_idm_at_chance_is_reinitialised_then_stops_the_run(tiny_data, tmp_pat
         calls.append(1)
         return {"accuracy": 0.0, "class_accuracy": [0.0, 0.0]}
 
-    monkeypatch.setattr(abco_module.ABCO, "validate_idm", dead)
+    monkeypatch.setattr(abco_module.BCOFamily, "validate_idm", dead)
     monkeypatch.setattr(abco_module, "MIN_JUDGED", 0)
     cfg = tiny_config("CartPole-v1", "abco", tiny_data, tmp_path / "run")
     final = train(cfg)

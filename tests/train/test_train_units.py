@@ -16,7 +16,9 @@ from abco_train.methods.bco.sampling import (
     run_action_distribution,
     sample_training_set,
 )
-from abco_train.networks.builders import FeatureSelfAttention, SelfAttention2d, build_networks
+from abco_train.networks.builders import build_networks
+from abco_train.networks.encoders import FeatureSelfAttention
+from abco_train.networks.layers import SelfAttention2d
 
 # -- attention ---------------------------------------------------------------------------------
 

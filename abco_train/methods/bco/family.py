@@ -1,7 +1,8 @@
 """ABCO(alpha) and its baselines in one file (Monteiro, Gavenski et al., IJCNN 2020).
 
-Algorithm 1 of the paper, top to bottom (:meth:`ABCO.train_iteration` then
-:meth:`ABCO.observe`, called by the harness in :mod:`abco_train.harness.loop` for ``i = 0..alpha``;
+Algorithm 1 of the paper, top to bottom (:meth:`BCOFamily.train_iteration` then
+:meth:`BCOFamily.observe`, called by the harness in :mod:`abco_train.harness.loop` for ``i =
+0..alpha``;
 the harness also owns seeding, the datasets and the run folder):
 
 1. ``I_s = I_pre`` (random-policy transitions with true actions).
@@ -62,136 +63,32 @@ from typing import Any
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 import abco_envs
 from abco_train.config.run import RunConfig, env_kind
 from abco_train.harness.rollouts import Rollouts
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method, TrainingFailed
+from abco_train.methods.bco.fitting import fit, predict, validation_split
 from abco_train.methods.bco.options import VARIANTS, BCOOptions
 from abco_train.methods.bco.sampling import sample_training_set
 from abco_train.methods.registry import register
 from abco_train.networks.builders import build_networks
 
-__all__ = ["VARIANTS", "ABCO", "DEAD_MARGIN", "validation_split", "TRANSPOSED_ACTIONS",
-           "transpose_batch"]  # fmt: skip
-
-#: A maze transposed about its main diagonal ((row, col) -> (col, row); start and goal stay)
-#: turns each action into another: N <-> W, S <-> E (``abco_envs.Action`` order N, S, E, W).
-TRANSPOSED_ACTIONS = torch.tensor([3, 2, 1, 0])
+__all__ = ["VARIANTS", "BCOFamily", "DEAD_MARGIN", "MIN_JUDGED"]
 
 #: An IDM whose held-out accuracy is below ``chance + DEAD_MARGIN`` is at chance (dead).
 DEAD_MARGIN = 0.05
 #: Below this many held-out transitions the accuracy is logged but not judged: on a few dozen
 #: transitions (tiny test datasets) chance and a working IDM cannot be told apart.
 MIN_JUDGED = 200
-#: Held out of ``I_pre`` by default: 10% of it, at most this many transitions.
-VALIDATION_CAP = 2_000
 
-
-
-def transpose_batch(frames: list[torch.Tensor], labels: torch.Tensor, rng: np.random.Generator
-                    ) -> tuple[list[torch.Tensor], torch.Tensor]:  # fmt: skip
-    """Transpose each example of a minibatch with probability 1/2 (``--augment transpose``).
-
-    A chosen example's ``(B, H, W, C)`` frames (all of them: ``s`` and ``s'`` of a transition)
-    are transposed about the main diagonal and its action label mapped by
-    :data:`TRANSPOSED_ACTIONS`: a transposed maze, rendered, is the transposed frame, and its
-    start ``(0, 0)`` and goal ``(n-1, n-1)`` stay where they are.
-    """
-    flip = torch.from_numpy(rng.random(len(labels)) < 0.5)
-    if not flip.any():
-        return frames, labels
-    out = []
-    for x in frames:
-        x = x.clone()
-        x[flip] = x[flip].transpose(1, 2)
-        out.append(x)
-    labels = labels.clone()
-    labels[flip] = TRANSPOSED_ACTIONS[labels[flip]]
-    return out, labels
-
-
-def _fit(
-    net: torch.nn.Module,
-    opt: torch.optim.Optimizer,
-    inputs: Any,
-    labels: torch.Tensor,
-    epochs: int,
-    batch_size: int,
-    rng: np.random.Generator,
-    desc: str = "",
-    quiet: bool = True,
-    device: torch.device | None = None,
-    augment: bool = False,
-    max_batches: int | None = None,
-) -> float:
-    """Cross-entropy epochs over ``labels``; ``inputs(idx) -> args of net`` (CPU tensors,
-    moved batch by batch to ``device``); ``augment``: :func:`transpose_batch` on each
-    minibatch; ``max_batches``: stop after that many updates. Mean loss of the last epoch."""
-    from tqdm.auto import tqdm
-
-    net.train()
-    n, loss_sum, seen = len(labels), 0.0, 0
-    batches = -(-n // batch_size)
-    total = epochs * batches if max_batches is None else min(epochs * batches, max_batches)
-    bar = tqdm(total=total, desc=desc, leave=False, disable=quiet, unit="batch")
-    done = 0  # not bar.n: a disabled bar counts nothing
-    for _ in range(epochs):
-        order = torch.from_numpy(rng.permutation(n))
-        loss_sum, seen = 0.0, 0
-        for start in range(0, n, batch_size):
-            if done >= total:
-                break
-            bar.update(1)
-            done += 1
-            idx = order[start : start + batch_size]
-            batch, targets = list(inputs(idx)), labels[idx]
-            if augment:
-                batch, targets = transpose_batch(batch, targets, rng)
-            batch = [x.to(device, non_blocking=True) for x in batch]
-            loss = F.cross_entropy(net(*batch), targets.to(device, non_blocking=True))
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            loss_sum, seen = loss_sum + loss.item() * len(idx), seen + len(idx)
-    bar.close()
-    return loss_sum / max(seen, 1)
-
-
-@torch.no_grad()
-def _predict(net: torch.nn.Module, inputs: Any, n: int, batch_size: int = 512,
-             device: torch.device | None = None) -> torch.Tensor:  # fmt: skip
-    """Argmax predictions of ``net`` over ``n`` rows, in batches (on CPU)."""
-    net.eval()
-    out = [
-        net(*[x.to(device) for x in inputs(torch.arange(s, min(s + batch_size, n)))]).argmax(1)
-        .cpu() for s in range(0, n, batch_size)
-    ]  # fmt: skip
-    return torch.cat(out) if out else torch.zeros(0, dtype=torch.long)
-
-
-def validation_split(n: int, size: int | None, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(train, held-out)`` indices of ``n`` pre-demonstration transitions.
-
-    The held-out part has ``size`` transitions (default 10%, at most :data:`VALIDATION_CAP`),
-    drawn by a generator of its own, so the split is fixed by the seed and moves none of the
-    run's other draws.
-
-    Example:
-        >>> train, held = validation_split(100, None, seed=0)
-        >>> len(train), len(held), len(set(train) & set(held))
-        (90, 10, 0)
-    """
-    size = min(n - 1, size if size is not None else min(VALIDATION_CAP, max(1, n // 10)))
-    order = np.random.default_rng([seed, 0x1D]).permutation(n)
-    return np.sort(order[size:]), np.sort(order[:size])
 
 
 @register(*VARIANTS)
-class ABCO(Method):
-    """ABCO(alpha) with the switches of :data:`VARIANTS` (see the module docstring)."""
+class BCOFamily(Method):
+    """BC, BCO, BCO(alpha) and ABCO(alpha): one implementation with the switches of
+    :data:`VARIANTS` (see the module docstring)."""
 
     @classmethod
     def variant(cls, name: str) -> dict[str, Any]:
@@ -287,17 +184,17 @@ class ABCO(Method):
                 idm_epochs = self._floored(self.options.idm_epochs, idm_set)
                 stats.update(self._train_idm_checked(idm_epochs * boost, iteration))
                 stats["idm_samples"] = int(len(self.s_pre) + len(self.s_pos))
-            labels = _predict(self.idm, self._expert_pairs, expert_n, device=self.device)
+            labels = predict(self.idm, self._expert_pairs, expert_n, device=self.device)
             stats["idm_expert_accuracy"] = float((labels == true).float().mean())
         self.labels = labels.numpy()
-        stats["policy_loss"] = _fit(
+        stats["policy_loss"] = fit(
             self.policy, self.policy_opt, lambda idx: (self.expert_obs[self.expert_t[idx]],),
             labels, policy_epochs, cfg.batch_size, self.rng, "policy", cfg.quiet, self.device,
             self.augment, policy_updates,
         )  # fmt: skip
         stats["policy_epochs"] = policy_epochs
         stats["policy_updates"] = policy_updates
-        predicted = _predict(self.policy, lambda idx: (self.expert_obs[self.expert_t[idx]],),
+        predicted = predict(self.policy, lambda idx: (self.expert_obs[self.expert_t[idx]],),
                              expert_n, device=self.device)  # fmt: skip
         stats["policy_label_accuracy"] = float((predicted == labels).float().mean())
         return stats
@@ -333,7 +230,7 @@ class ABCO(Method):
         """Accuracy of the IDM on the held-out pre-demonstrations, overall and per class."""
         if len(self.val_t) == 0:
             return {"accuracy": float("nan"), "class_accuracy": []}
-        pred = _predict(self.idm, lambda idx: (self.pre_obs[self.val_t[idx]],
+        pred = predict(self.idm, lambda idx: (self.pre_obs[self.val_t[idx]],
                                                self.pre_obs[self.val_t[idx] + 1]),
                         len(self.val_t), device=self.device)  # fmt: skip
         hits = (pred == self.val_actions).numpy()
@@ -407,7 +304,7 @@ class ABCO(Method):
             s[~is_pre], s1[~is_pre] = self.pos_obs[rows], self.pos_obs[rows + 1]
             return s, s1
 
-        return _fit(self.idm, self.idm_opt, pairs, labels, 1, self.config.batch_size,
+        return fit(self.idm, self.idm_opt, pairs, labels, 1, self.config.batch_size,
                     self.rng, "IDM", self.config.quiet, self.device, self.augment)  # fmt: skip
 
     # -- post-demonstrations and the next I_s --------------------------------------------------

@@ -41,9 +41,10 @@ the paper) with the cost ``log D(s, s')``. Here is where each piece lives:
   - ``log_d``: ``r = log D``, always negative (a cost per step); for comparison.
   - Rewards are clipped to ``[-reward_clip, reward_clip]``.
 
-* **RL learner**: stable-baselines3's PPO (step (c) with PPO instead of TRPO; SB3 is
-  imported lazily, the optional extra ``abco[rl]``) in a vector env of the run's environment
-  whose reward is replaced by a VecEnv wrapper (``DiscriminatorReward``): for every step of
+* **RL learner** (:mod:`abco_train.methods.gaifo.sb3`): stable-baselines3's PPO (step (c)
+  with PPO instead of TRPO; SB3 is imported once a run starts, the optional extra
+  ``abco[rl]``) in a vector env of the run's environment whose reward is replaced by a
+  VecEnv wrapper (:class:`~abco_train.methods.gaifo.sb3.DiscriminatorReward`): for every step of
   all ``n_envs`` envs at once it computes ``r = f(l(s, s'))`` with ``s'`` the env's terminal
   observation where an episode ended (SB3 returns the next episode's first observation
   there), and it stores the pairs for step (b). The env's own reward never reaches PPO (the
@@ -59,92 +60,59 @@ the paper) with the cost ``log D(s, s')``. Here is where each piece lives:
   steps per run) is split into rounds, spread evenly over the harness's iterations, each of
   which is then evaluated by the harness (greedy: PPO's deterministic actions, :meth:`act`).
 
-Every PPO env step is counted as ``rl`` (SB3's ``num_timesteps``); the method uses no
+Every PPO env step is counted as ``rl`` (SB3's ``num_timesteps``, which every iteration
+restarts); the method uses no
 pre-demonstrations and learns nothing from the harness's evaluation runs, so both other
 counts stay 0. Expert actions are never read.
 
 Seeding: ``D`` is initialised from torch's generator (seeded by the harness); PPO gets
 ``seed=`` derived from the run's seed (SB3 then re-seeds python, numpy's and torch's global
 generators with it); its env resets and numpy's global generator (PPO's minibatch order)
-are re-seeded from ``(seed, iteration)`` at the start of every iteration, which restarts the
-env's episodes, so that a run resumed from a checkpoint continues exactly as an
+are re-seeded from ``(seed, iteration)`` at the start of every iteration, whose first PPO
+rollout restarts the env's episodes (``learn(reset_num_timesteps=True)``), so that a run
+resumed from a checkpoint continues exactly as an
 uninterrupted one (torch's generator, PPO's action draws, is checkpointed by the harness).
 Same seed, same run on CPU.
 
-Settings are ``config.method_options`` over the per-environment table
-:data:`GAIFO_DEFAULTS` (see :func:`gaifo_options`); the RunConfig fields of ABCO's networks
+Settings are :class:`~abco_train.methods.gaifo.options.GAIfOOptions` (``--gaifo-*`` flags or
+``config.method_options``) over the per-environment table
+:data:`~abco_train.methods.gaifo.options.GAIFO_DEFAULTS`; the RunConfig fields of ABCO's networks
 (``lr``, ``batch_size``, epochs) are not used, ``arch`` and ``attention`` choose the image
 discriminator's network.
 """
 
 from __future__ import annotations
 
-import functools
 import time
-from collections.abc import Callable, Mapping
-from typing import Any
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
 
-import gymnasium as gym
 import numpy as np
 import torch
 import torch.nn.functional as F
-from torch import nn
 
-import abco_envs
 from abco_train.config.run import ConfigError, RunConfig, env_kind
+from abco_train.harness.runtime import derived_seed
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method, TrainingFailed
+from abco_train.methods.gaifo.options import GAIFO_DEFAULTS, REWARDS, GAIfOOptions
 from abco_train.methods.registry import register
-from abco_train.networks.builders import IDMNet, build_networks
+from abco_train.networks.builders import build_networks
+from abco_train.networks.heads import IDMNet
 
-__all__ = ["GAIfO", "GAIFO_DEFAULTS", "REWARDS", "gaifo_options", "build_discriminator",
+if TYPE_CHECKING:
+    from stable_baselines3 import PPO
+
+    from abco_train.methods.gaifo.sb3 import DiscriminatorReward
+
+__all__ = ["GAIfO", "GAIfOOptions", "GAIFO_DEFAULTS", "REWARDS", "build_discriminator",
            "reward_from_logits", "EXPERT_LABEL", "LEARNER_LABEL", "SB3_INSTALL"]  # fmt: skip
 
 #: The discriminator's label of expert pairs; the learner's pairs get :data:`LEARNER_LABEL`.
 EXPERT_LABEL = 1.0
 LEARNER_LABEL = 0.0
 
-#: How the learner's reward is computed from the discriminator's logit (module docstring).
-REWARDS = ("logit", "gail", "log_d")
-
 SB3_INSTALL = 'pip install "abco[rl]"  (or: pip install "stable-baselines3>=2.3")'
-
-#: Options of every run; :data:`GAIFO_DEFAULTS` changes them per env kind and environment.
-COMMON_OPTIONS: dict[str, Any] = {
-    "rl_steps": 150_000,      # PPO env steps per run (the budget), split into rounds
-    "n_envs": 16,             # parallel envs of PPO's rollouts
-    "n_steps": 128,           # steps per env per rollout: a round is n_steps * n_envs
-    "batch_size": 64,         # PPO minibatch
-    "n_epochs": 4,            # PPO epochs per rollout
-    "learning_rate": 3e-4,    # PPO (Adam)
-    "gamma": 0.99,
-    "gae_lambda": 0.95,
-    "clip_range": 0.2,
-    "ent_coef": 0.0,
-    "vf_coef": 0.5,
-    "max_grad_norm": 0.5,
-    "net_arch": [64, 64],     # PPO's policy and value MLPs (after the CNN for frames)
-    "features_dim": 256,      # frames: width of the policy CNN's output
-    "reward": "logit",        # one of REWARDS
-    "reward_clip": 10.0,
-    "d_lr": 3e-4,             # discriminator (Adam)
-    "d_epochs": 1,            # passes over each round's learner pairs
-    "d_batch_size": 256,      # learner pairs per D minibatch (plus as many expert pairs)
-    "d_hidden": 64,           # vectors: width of the discriminator MLP
-}  # fmt: skip
-
-#: Per env kind, then per environment, on top of :data:`COMMON_OPTIONS`, chosen on seeds
-#: 100-102 (CartPole's reward: see the module docstring; docs/training.md has the numbers).
-GAIFO_DEFAULTS: dict[str, dict[str, Any]] = {
-    "classic": {},
-    "maze": {"rl_steps": 60_000, "n_steps": 64},
-    "CartPole-v1": {"rl_steps": 50_000, "reward": "gail"},
-    "Acrobot-v1": {},
-    "MountainCar-v0": {},
-    "AbcoMaze3x3-v0": {},
-    "AbcoMaze5x5-v0": {},
-    "AbcoMaze10x10-v0": {},
-}  # fmt: skip
 
 #: Tags of the seeds derived from the run's seed (one stream each).
 _SB3_SEED, _ITERATION_SEED = 0x6A1F0, 0x6A1F1
@@ -159,36 +127,6 @@ def _require_sb3() -> None:
                           f"{SB3_INSTALL}") from exc  # fmt: skip
 
 
-def gaifo_options(config: RunConfig) -> dict[str, Any]:
-    """The run's GAIfO settings: ``config.method_options`` over the env's defaults.
-
-    Raises:
-        ConfigError: An unknown option or a bad value (the message names it).
-    """
-    name = abco_envs.env_name(config.env)
-    options = {**COMMON_OPTIONS, **GAIFO_DEFAULTS[env_kind(config.env)],
-               **GAIFO_DEFAULTS.get(name, {})}  # fmt: skip
-    unknown = sorted(set(config.method_options) - set(options))
-    if unknown:
-        raise ConfigError(f"unknown gaifo option(s) {', '.join(unknown)}; known: "
-                          f"{', '.join(sorted(options))}")  # fmt: skip
-    options.update(config.method_options)
-    if options["reward"] not in REWARDS:
-        raise ConfigError(f"gaifo option reward must be one of {', '.join(REWARDS)}, got "
-                          f"{options['reward']!r}")  # fmt: skip
-    for key in ("rl_steps", "n_envs", "n_steps", "batch_size", "n_epochs", "d_epochs",
-                "d_batch_size", "d_hidden", "features_dim"):  # fmt: skip
-        if not isinstance(options[key], int) or options[key] < 1:
-            raise ConfigError(f"gaifo option {key} must be an integer >= 1, got "
-                              f"{options[key]!r}")  # fmt: skip
-    return options
-
-
-def _derived_seed(*parts: int) -> int:
-    """A 31-bit seed of its own from ``parts`` (the run's seed and a tag)."""
-    return int(np.random.SeedSequence([int(p) for p in parts]).generate_state(1)[0] >> 1)
-
-
 # -- the discriminator -------------------------------------------------------------------------
 
 
@@ -200,7 +138,7 @@ def build_discriminator(data: TrainingData, arch: str, attention: bool = False,
     and std of the expert's ``s`` and ``s' - s``; frames (uint8) through ``arch`` on the
     frame and the frame difference.
     """
-    stats: dict[str, np.ndarray] = {}
+    stats: dict[str, Any] = {}
     if len(data.observation_space.shape) == 1:
         s = data.expert_obs[data.expert_t].astype(np.float64)
         d = data.expert_obs[data.expert_t + 1].astype(np.float64) - s
@@ -234,101 +172,6 @@ def reward_from_logits(logits: torch.Tensor, form: str = "logit",
     return reward if clip is None else reward.clamp(-clip, clip)
 
 
-# -- stable-baselines3 pieces (imported lazily) --------------------------------------------------
-
-
-@functools.cache
-def _sb3() -> Any:
-    """stable-baselines3's PPO and abco's SB3 classes, defined on first use."""
-    _require_sb3()
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.logger import Logger
-    from stable_baselines3.common.monitor import Monitor
-    from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecEnvWrapper
-
-    class DiscriminatorReward(VecEnvWrapper):
-        """A VecEnv whose reward is ``reward_fn(s, s')``, batched over its envs; it keeps
-        every pair it produced (the learner's transitions) until :meth:`take_pairs`."""
-
-        def __init__(self, venv: Any, reward_fn: Callable[[np.ndarray, np.ndarray], np.ndarray]
-                     ) -> None:  # fmt: skip
-            super().__init__(venv)
-            self.reward_fn = reward_fn
-            self.last_obs: np.ndarray | None = None
-            self._s: list[np.ndarray] = []
-            self._s1: list[np.ndarray] = []
-            self.rewards: list[np.ndarray] = []
-
-        def reset(self) -> np.ndarray:
-            obs = self.venv.reset()
-            self.last_obs = np.array(obs, copy=True)
-            return obs
-
-        def step_wait(self) -> Any:
-            obs, _env_reward, dones, infos = self.venv.step_wait()  # the env's reward: dropped
-            assert self.last_obs is not None, "reset() before step()"
-            nxt = np.array(obs, copy=True)
-            for i in np.flatnonzero(dones):  # the episode's last s', not the next one's first
-                nxt[i] = infos[i]["terminal_observation"]
-            rewards = np.asarray(self.reward_fn(self.last_obs, nxt), dtype=np.float32)
-            self._s.append(self.last_obs)
-            self._s1.append(nxt)
-            self.rewards.append(rewards)
-            self.last_obs = np.array(obs, copy=True)
-            return obs, rewards, dones, infos
-
-        def take_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            """The pairs (and their rewards) since the last call, in step order; forgets them."""
-            out = (np.concatenate(self._s), np.concatenate(self._s1),
-                   np.concatenate(self.rewards))  # fmt: skip
-            self._s, self._s1, self.rewards = [], [], []
-            return out
-
-    class Standardize(BaseFeaturesExtractor):
-        """Vector observations standardised by fixed (expert) statistics, clipped to +-10."""
-
-        def __init__(self, observation_space: gym.spaces.Box, mean: list[float],
-                     std: list[float]) -> None:  # fmt: skip
-            super().__init__(observation_space, int(np.prod(observation_space.shape)))
-            self.register_buffer("mean", torch.as_tensor(mean, dtype=torch.float32))
-            self.register_buffer("std", torch.as_tensor(std, dtype=torch.float32))
-
-        def forward(self, obs: torch.Tensor) -> torch.Tensor:
-            return ((obs.flatten(1) - self.mean) / self.std).clamp(-10.0, 10.0)
-
-    class SmallCNN(BaseFeaturesExtractor):
-        """A compact CNN for 64x64 frames (channels first, scaled to [0, 1] by SB3):
-        ``conv 4x4/4 (16) -> conv 3x3/2 (32) -> conv 3x3 (32) -> FC features_dim``."""
-
-        def __init__(self, observation_space: gym.spaces.Box, features_dim: int = 256) -> None:
-            super().__init__(observation_space, features_dim)
-            c, h, w = observation_space.shape
-            self.body = nn.Sequential(
-                nn.Conv2d(c, 16, 4, stride=4), nn.ReLU(),
-                nn.Conv2d(16, 32, 3, stride=2, padding=1), nn.ReLU(),
-                nn.Conv2d(32, 32, 3, padding=1), nn.ReLU(), nn.Flatten(),
-            )  # fmt: skip
-            with torch.no_grad():
-                n = int(self.body(torch.zeros(1, c, h, w)).shape[1])
-            self.head = nn.Sequential(nn.Linear(n, features_dim), nn.ReLU())
-
-        def forward(self, obs: torch.Tensor) -> torch.Tensor:
-            return self.head(self.body(obs))
-
-    class NS:
-        pass
-
-    ns = NS()
-    ns.PPO, ns.Monitor, ns.DummyVecEnv, ns.Logger = PPO, Monitor, DummyVecEnv, Logger
-    ns.DiscriminatorReward, ns.Standardize, ns.SmallCNN = DiscriminatorReward, Standardize, SmallCNN
-    return ns
-
-
-def _make_env(env_id: str, kwargs: dict[str, Any], monitor: Any) -> gym.Env:
-    return monitor(gym.make(env_id, **kwargs))
-
-
 # -- the method -------------------------------------------------------------------------------
 
 
@@ -346,52 +189,37 @@ class GAIfO(Method):
         _require_sb3()
         return {"attention": False}
 
+    @classmethod
+    def resolve_options(cls, config: RunConfig) -> GAIfOOptions:
+        """The run's :class:`~abco_train.methods.gaifo.options.GAIfOOptions`."""
+        return GAIfOOptions.for_run(config, config.method)
+
+    Options = GAIfOOptions
+    options: GAIfOOptions
+
     def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
         super().__init__(config, data, rng)
-        self.options = opt = gaifo_options(config)
-        sb3 = _sb3()
+        _require_sb3()
+        from abco_train.methods.gaifo import sb3  # stable-baselines3: only once a run starts
+
+        opt = self.options
         self.device = torch.device(config.device)
         # -- the discriminator, from torch's generator (seeded by the harness) ---------------
         self.discriminator = build_discriminator(
-            data, config.arch, bool(config.attention), opt["d_hidden"]).to(self.device)
-        self.d_opt = torch.optim.Adam(self.discriminator.parameters(), lr=opt["d_lr"])
+            data, config.arch, bool(config.attention), opt.d_hidden).to(self.device)
+        self.d_opt = torch.optim.Adam(self.discriminator.parameters(), lr=opt.d_lr)
         self.expert_obs = torch.from_numpy(data.expert_obs)
         self.expert_t = torch.from_numpy(data.expert_t)
-        # -- the learner's env: the run's env, its reward replaced by D's -------------------
+        # -- the learner's env (the run's env, its reward replaced by D's) and its PPO --------
         maze = env_kind(config.env) == "maze"
         kwargs = {**data.env_kwargs, "split": "train"} if maze else dict(data.env_kwargs)
-        venv = sb3.DummyVecEnv([
-            functools.partial(_make_env, config.env, kwargs, sb3.Monitor)
-            for _ in range(opt["n_envs"])
-        ])  # fmt: skip
-        self.env = sb3.DiscriminatorReward(venv, self.reward)
-        # -- PPO -----------------------------------------------------------------------------
-        policy_kwargs: dict[str, Any] = {"net_arch": list(opt["net_arch"])}
-        if maze:
-            policy = "CnnPolicy"
-            policy_kwargs.update(features_extractor_class=sb3.SmallCNN,
-                                 features_extractor_kwargs={"features_dim": opt["features_dim"]},
-                                 share_features_extractor=True)  # fmt: skip
-        else:
-            policy = "MlpPolicy"
-            s = data.expert_obs[data.expert_t].astype(np.float64)
-            policy_kwargs.update(features_extractor_class=sb3.Standardize,
-                                 features_extractor_kwargs={
-                                     "mean": s.mean(0).tolist(),
-                                     "std": np.maximum(s.std(0), 1e-6).tolist()})  # fmt: skip
-        self.model = sb3.PPO(
-            policy, self.env, learning_rate=opt["learning_rate"], n_steps=opt["n_steps"],
-            batch_size=opt["batch_size"], n_epochs=opt["n_epochs"], gamma=opt["gamma"],
-            gae_lambda=opt["gae_lambda"], clip_range=opt["clip_range"],
-            ent_coef=opt["ent_coef"], vf_coef=opt["vf_coef"],
-            max_grad_norm=opt["max_grad_norm"], policy_kwargs=policy_kwargs, verbose=0,
-            seed=_derived_seed(config.seed, _SB3_SEED), device=self.device,
-        )  # fmt: skip
-        # A logger of our own: without one, every learn() call makes a folder SB3-<date> in
-        # the temp dir (SB3's default logger), thousands per grid.
-        self.model.set_logger(sb3.Logger(folder=None, output_formats=[]))
-        self.round_steps = opt["n_steps"] * opt["n_envs"]
-        self.rounds_total = -(-opt["rl_steps"] // self.round_steps)
+        self.env: DiscriminatorReward = sb3.learner_env(config.env, kwargs, opt.n_envs,
+                                                        self.reward)  # fmt: skip
+        self.model: PPO = sb3.make_ppo(
+            self.env, opt, frames=maze, expert_states=data.expert_obs[data.expert_t],
+            seed=derived_seed(config.seed, _SB3_SEED), device=self.device)  # fmt: skip
+        self.round_steps = opt.n_steps * opt.n_envs
+        self.rounds_total = -(-opt.rl_steps // self.round_steps)
 
     # -- the reward and the discriminator's updates ------------------------------------------
 
@@ -405,7 +233,7 @@ class GAIfO(Method):
 
     def reward(self, s: np.ndarray, s1: np.ndarray) -> np.ndarray:
         """The learner's reward of a batch of its transitions (``reward`` option)."""
-        form, clip = self.options["reward"], self.options["reward_clip"]
+        form, clip = self.options.reward, self.options.reward_clip
         return reward_from_logits(self.logits(s, s1), form, clip).numpy()
 
     def update_discriminator(self, learner_s: np.ndarray, learner_s1: np.ndarray
@@ -414,19 +242,19 @@ class GAIfO(Method):
         minibatch labelled :data:`LEARNER_LABEL` and as many uniformly drawn expert pairs
         labelled :data:`EXPERT_LABEL`. Returns the last pass's mean loss and accuracies."""
         opt, net = self.options, self.discriminator
-        n, batch = len(learner_s), self.options["d_batch_size"]
-        learner_s, learner_s1 = torch.from_numpy(learner_s), torch.from_numpy(learner_s1)
+        n, batch = len(learner_s), opt.d_batch_size
+        pairs_s, pairs_s1 = torch.from_numpy(learner_s), torch.from_numpy(learner_s1)
         net.train()
         loss_sum = hits_e = hits_l = seen = 0.0
-        for _ in range(opt["d_epochs"]):
+        for _ in range(opt.d_epochs):
             loss_sum = hits_e = hits_l = seen = 0.0
             order = torch.from_numpy(self.rng.permutation(n))
             for start in range(0, n, batch):
                 idx = order[start : start + batch]
                 rows = self.expert_t[torch.from_numpy(self.rng.integers(0, len(self.expert_t),
                                                                         len(idx)))]
-                s = torch.cat([self.expert_obs[rows], learner_s[idx]]).to(self.device)
-                s1 = torch.cat([self.expert_obs[rows + 1], learner_s1[idx]]).to(self.device)
+                s = torch.cat([self.expert_obs[rows], pairs_s[idx]]).to(self.device)
+                s1 = torch.cat([self.expert_obs[rows + 1], pairs_s1[idx]]).to(self.device)
                 labels = torch.cat([torch.full((len(idx),), EXPERT_LABEL),
                                     torch.full((len(idx),), LEARNER_LABEL)]).to(self.device)
                 logits = net(s, s1).squeeze(1)
@@ -457,26 +285,26 @@ class GAIfO(Method):
     def train_iteration(self, iteration: int) -> dict[str, float]:
         """Rounds of PPO on D's rewards, each followed by D's update on its pairs."""
         model, env = self.model, self.env
-        seed = _derived_seed(self.config.seed, _ITERATION_SEED, iteration)
+        seed = derived_seed(self.config.seed, _ITERATION_SEED, iteration)
         np.random.seed(seed)  # noqa: NPY002 -- PPO draws its minibatch order from it
-        env.seed(seed)  # the episodes restart from seeded resets (exact resuming)
-        model._last_obs = None  # learn() then resets the env
-        if model.ep_info_buffer is not None:  # the log's episodes: this iteration's only
-            model.ep_info_buffer.clear()
+        env.seed(seed)  # the next reset seeds the episodes (exact resuming)
         rounds = self.rounds_of(iteration)
         t_rl = t_d = 0.0
-        stats: dict[str, float] = {}
+        stats: dict[str, Any] = {}
         rewards: list[float] = []
-        for _ in range(rounds):
-            before, t0 = model.num_timesteps, time.perf_counter()
-            model.learn(self.round_steps, reset_num_timesteps=False)
+        for k in range(rounds):
+            before, t0 = (0 if k == 0 else model.num_timesteps), time.perf_counter()
+            # The iteration's first round starts afresh (reset_num_timesteps): SB3 resets the
+            # env (the seeded episodes above) and empties its episode log (this iteration's
+            # episodes only); with constant schedules its step count steers nothing else.
+            model.learn(self.round_steps, reset_num_timesteps=k == 0)
             self.count("rl", model.num_timesteps - before)
             t1 = time.perf_counter()
             s, s1, r = env.take_pairs()
             rewards.append(float(r.mean()))
             stats = self.update_discriminator(s, s1)
             t_rl, t_d = t_rl + t1 - t0, t_d + time.perf_counter() - t1
-        episodes = list(model.ep_info_buffer or [])
+        episodes = list(model.ep_info_buffer or []) if rounds else []
         stats.update({
             "rounds": rounds, "rl_steps": rounds * self.round_steps,
             "reward_mean": float(np.mean(rewards)) if rewards else float("nan"),
@@ -490,7 +318,7 @@ class GAIfO(Method):
             "seconds_rl": t_rl, "seconds_discriminator": t_d,
         })  # fmt: skip
         if iteration == 0:
-            stats["options"] = dict(self.options)  # the run's effective settings
+            stats["options"] = self.options.to_dict()  # the run's effective settings
         return stats
 
     # -- acting and state -----------------------------------------------------------------------
@@ -501,20 +329,19 @@ class GAIfO(Method):
         return np.asarray(actions, dtype=np.int64).reshape(-1)
 
     def state_dict(self) -> dict[str, Any]:
-        """PPO's networks and optimiser, its step count, D and its optimiser, the rng."""
+        """PPO's networks and optimiser, D and its optimiser, the rng. (PPO's step count is
+        not needed: every iteration restarts it, :meth:`train_iteration`.)"""
         return {
             "policy": self.model.policy.state_dict(),
             "policy_opt": self.model.policy.optimizer.state_dict(),
-            "num_timesteps": int(self.model.num_timesteps),
             "discriminator": self.discriminator.state_dict(), "d_opt": self.d_opt.state_dict(),
             "rng": self.rng.bit_generator.state,
         }  # fmt: skip
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore :meth:`state_dict`."""
+        """Restore :meth:`state_dict` (an older checkpoint's ``num_timesteps`` is not read)."""
         self.model.policy.load_state_dict(state["policy"])
         self.model.policy.optimizer.load_state_dict(state["policy_opt"])
-        self.model.num_timesteps = int(state["num_timesteps"])
         self.discriminator.load_state_dict(state["discriminator"])
         self.d_opt.load_state_dict(state["d_opt"])
         self.rng.bit_generator.state = state["rng"]

@@ -3,10 +3,42 @@ trains them).
 
 The min-over-latents and expected-prediction losses, the latent forward models ``G(E(s), z)``
 for vectors and frames (with :class:`CellAverage` for the maze's cells), the latent policy
-``pi(z | s)`` and the remapping classifier ``P(a | s, z)``.
+``pi(z | s)``, the remapping classifier ``P(a | s, z)`` and the minibatches they train on.
+
+What ``G`` predicts (:meth:`abco_train.methods.ilpo.method.ILPO._targets`), and with what:
+
+* **Vector states**: ``Delta = s' - s`` standardised per feature with the expert pairs' mean
+  and standard deviation (inputs standardised likewise). ``E`` is a two-layer MLP; ``z``'s
+  learnt embedding is added to a linear map of ``E(s)`` (a linear layer over
+  ``concat(E(s), onehot(z))``, the authors' design) and two layers predict ``Delta``.
+* **Frames** (mazes, 64x64 RGB): the difference image ``s' - s`` (in ``[-1, 1]``),
+  average-pooled by ``pool`` (8x8 maps up to 5x5 mazes, 16x16 for 10x10: at least ~1.6 pixels
+  per cell) and divided by its RMS over the expert pairs. ``G`` is fully convolutional on that
+  grid (``E``: a strided convolution and three dilated 3x3 convolutions; ``z``'s embedding
+  added to every position's channels; two 3x3 convolutions out). Why this target: a fixed,
+  downsampled difference cannot collapse the way a learnt embedding target can (an encoder
+  mapping every frame to one point predicts it perfectly); it is zero everywhere but at the
+  agent's old and new cell, which pooling keeps; it is computed once for all pairs; and it is
+  small (192 or 768 values per latent instead of a 64x64x3 frame), so ``G`` trains in about a
+  minute on one CPU thread. Why convolutional: with one set of filters at every position a
+  latent action means the same move wherever the agent is; an MLP head over flat features
+  (tried first) let latent 0 mean "down" in one cell and "right" in another.
+* **Cells** (``target="cells"``, the 10x10 maze's default): a 10x10 maze's cells are 6 or 7
+  pixels wide, so a fixed pooling cuts each at another offset and one move's pooled
+  difference looks different in every cell. This target is how much each cell changed, the
+  sum of ``|s' - s|`` over the cell's pixels and the channels (:class:`CellAverage`, at the
+  renderer's cell borders), one value per cell: a move is the same two cells' change
+  wherever it is made, whatever the cells' sizes (and the goal's colour changes only how
+  much). ``G`` is then local: ``E`` is a 3x3 convolution at full resolution averaged over
+  each cell and a 1x1 convolution, and the head one 3x3 convolution over cells, so a cell's
+  prediction sees its neighbours only. A global ``G`` can learn where the deterministic
+  expert goes next from the whole maze, and its latents need not stand for moves; a local
+  one cannot, so they must (docs/training.md).
 """
 
 from __future__ import annotations
+
+from collections.abc import Iterator
 
 import numpy as np
 import torch
@@ -14,11 +46,12 @@ import torch.nn.functional as F
 from torch import nn
 
 from abco_envs.maze.render import cell_edges
-from abco_train.networks.builders import CompactCNN, image_input
+from abco_train.networks.encoders import CompactCNN
+from abco_train.networks.layers import image_input
 
 __all__ = ["latent_errors", "min_over_latents_loss", "expected_prediction_loss", "Standardise",
            "VectorForwardModel", "CellAverage", "ImageForwardModel", "latent_policy",
-           "ILPONet", "RemapNet"]  # fmt: skip
+           "ILPONet", "RemapNet", "minibatches"]  # fmt: skip
 
 
 # -- the losses -------------------------------------------------------------------------------
@@ -232,7 +265,8 @@ class ILPONet(nn.Module):
 
 
 class RemapNet(nn.Module):
-    """``P(a | s, z)``: a small classifier over features of ``(s, z)`` (``ILPO._remap_input``)."""
+    """``P(a | s, z)``: a small classifier over features of ``(s, z)``
+    (:meth:`abco_train.methods.ilpo.remapping.ActionRemapping.inputs`)."""
 
     def __init__(self, in_features: int, n_actions: int, hidden: int = 64) -> None:
         super().__init__()
@@ -243,3 +277,25 @@ class RemapNet(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Action logits."""
         return self.body(x)
+
+
+# -- minibatches --------------------------------------------------------------------------------
+
+
+def minibatches(rng: np.random.Generator, n: int, steps: int, batch_size: int
+                ) -> Iterator[torch.Tensor]:  # fmt: skip
+    """``steps`` minibatches of indices into ``range(n)``: shuffled epochs (one permutation
+    drawn from ``rng`` each), one after another.
+
+    Example:
+        >>> [b.tolist() for b in minibatches(np.random.default_rng(0), 3, 4, 2)]
+        [[2, 0], [1], [2, 1], [0]]
+    """
+    done = 0
+    while done < steps:
+        order = torch.from_numpy(rng.permutation(n))
+        for start in range(0, n, batch_size):
+            if done == steps:
+                return
+            done += 1
+            yield order[start : start + batch_size]
