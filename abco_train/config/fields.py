@@ -33,8 +33,10 @@ from collections.abc import Collection, Mapping
 from dataclasses import MISSING, Field, asdict, dataclass, field, fields
 from typing import Any, ClassVar
 
+from typing_extensions import Self
+
 __all__ = ["ConfigError", "option", "flag_of", "check_fields", "add_field_options",
-           "MethodOptions", "json_object"]  # fmt: skip
+           "MethodOptions", "json_object", "int_list"]  # fmt: skip
 
 
 class ConfigError(ValueError):
@@ -79,6 +81,8 @@ def _type_problem(value: Any, kind: Any) -> str | None:
         return None if isinstance(value, str) else "must be a string"
     if kind is dict:
         return None if isinstance(value, dict) else "must be a JSON object"
+    if kind is list:
+        return None if isinstance(value, list) else "must be a list"
     return None
 
 
@@ -128,6 +132,15 @@ def json_object(text: str) -> dict[str, Any]:
     return value
 
 
+def int_list(text: str) -> list[int]:
+    """An argparse type: comma-separated integers (``64,64``)."""
+    try:
+        return [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a comma-separated list of integers: {text!r}"
+                                         ) from None  # fmt: skip
+
+
 def add_field_options(
     parser: argparse.ArgumentParser | Any,
     cls: type,
@@ -168,6 +181,8 @@ def add_field_options(
         elif kind is dict:
             kwargs["default"] = None if unset_defaults else {}
             parser.add_argument(flag, type=json_object, metavar="JSON", **kwargs)
+        elif kind is list:
+            parser.add_argument(flag, type=int_list, metavar="N[,N...]", **kwargs)
         else:
             choices = f.metadata.get("choices")
             metavar = None if choices else f.name.upper()
@@ -192,7 +207,7 @@ class MethodOptions:
 
     @classmethod
     def resolve(cls, given: Mapping[str, Any], defaults: Mapping[str, Any], method: str
-                ) -> MethodOptions:  # fmt: skip
+                ) -> Self:  # fmt: skip
         """The options: ``given`` (the user's) over ``defaults``, checked.
 
         Raises:

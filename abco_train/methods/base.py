@@ -121,10 +121,6 @@ class Method(ABC):
         Raises:
             ConfigError: An unknown option or a value that does not fit.
         """
-        if cls.__name__ == "GAIfO" and cls.Options is MethodOptions:  # TEMPORARY
-            from types import SimpleNamespace
-
-            return SimpleNamespace(to_dict=lambda: dict(config.method_options))  # type: ignore
         return cls.Options.resolve(config.method_options, {}, config.method)
 
     @property

@@ -77,17 +77,11 @@ def builtin_options() -> dict[str, type[MethodOptions]]:
     """The options class of each built-in method, read without importing torch (the command
     line builds its flags from them)."""
     from abco_train.methods.bco.options import VARIANTS, BCOOptions
+    from abco_train.methods.gaifo.options import GAIfOOptions
+    from abco_train.methods.ilpo.options import ILPOOptions
 
-    table: dict[str, type[MethodOptions]] = {**dict.fromkeys(VARIANTS, BCOOptions),
-                                             "iupe": BCOOptions}  # fmt: skip
-    try:  # TEMPORARY until ilpo/gaifo options exist
-        from abco_train.methods.gaifo.options import GAIfOOptions
-        from abco_train.methods.ilpo.options import ILPOOptions
-
-        table.update(ilpo=ILPOOptions, gaifo=GAIfOOptions)
-    except ImportError:
-        pass
-    return table
+    return {**dict.fromkeys(VARIANTS, BCOOptions), "iupe": BCOOptions, "ilpo": ILPOOptions,
+            "gaifo": GAIfOOptions}  # fmt: skip
 
 
 def options_class(name: str) -> type[MethodOptions]:

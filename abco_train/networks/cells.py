@@ -19,7 +19,7 @@ from abco_train.networks.layers import SelfAttention2d, image_input
 #: The floor of the planner's action values before the log (a walled-off move).
 LOG_FLOOR = 1e-6
 
-__all__ = ["cell_centres", "CellReadout", "ValuePlanner", "CellNet", "PlannedHead",
+__all__ = ["cell_centres", "CellAverage", "CellReadout", "ValuePlanner", "CellNet", "PlannedHead",
            "CELLNET_IDM_ITERATIONS", "LOG_FLOOR"]  # fmt: skip
 
 
@@ -36,6 +36,35 @@ def cell_centres(grid: int, height: int, width: int) -> torch.Tensor:
     x = (cols[:-1] + cols[1:]) / width - 1.0
     yy, xx = np.meshgrid(y, x, indexing="ij")
     return torch.as_tensor(np.stack([xx, yy], axis=-1)[None], dtype=torch.float32)
+
+
+class CellAverage(nn.Module):
+    """The mean (``total``: the sum) of a ``(B, C, H, W)`` map over each cell of an
+    ``n x n`` maze: ``(B, C, n, n)``.
+
+    Cell borders fall where the renderer draws them (:func:`abco_envs.maze.render.cell_edges`),
+    so every cell takes exactly its own pixels: ILPO's ``cells`` target, how much each cell
+    changed. (:func:`cell_centres` reads a feature map at each cell's centre instead: the cell
+    networks' convolutions have already spread a cell's content there.)
+    """
+
+    def __init__(self, grid: int, height: int, width: int, total: bool = False) -> None:
+        super().__init__()
+        self.grid = int(grid)
+        self.register_buffer("rows", self._means(grid, height, total), persistent=False)
+        self.register_buffer("cols", self._means(grid, width, total), persistent=False)
+
+    @staticmethod
+    def _means(grid: int, size: int, total: bool) -> torch.Tensor:
+        """``(grid, size)``: row ``i`` averages (``total``: sums) the pixels of band ``i``."""
+        edges = cell_edges(grid, size)
+        m = np.zeros((grid, size), dtype=np.float32)
+        for i in range(grid):
+            m[i, edges[i] : edges[i + 1]] = 1.0 if total else 1.0 / (edges[i + 1] - edges[i])
+        return torch.from_numpy(m)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.rows @ x @ self.cols.T
 
 
 class CellReadout(nn.Module):

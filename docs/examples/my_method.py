@@ -5,16 +5,19 @@ pre-demonstration transition closest to it in ``(s, s' - s)`` (standardised); th
 then acts like the expert state nearest to its observation. No training, numpy only, for
 the vector environments (CartPole-v1, Acrobot-v1, MountainCar-v0). It counts the
 pre-demonstration transitions it uses (``self.count``); it takes no environment steps of its
-own, so its other interaction counts stay 0.
+own, so its other interaction counts stay 0. Its one option is typed (:class:`KnnOptions`):
+``--knn-max-pre 2000`` on the command line, or ``--method-options '{"max_pre": 2000}'``.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from abco_train.config import RunConfig
+from abco_train.config.fields import MethodOptions, option
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods import Method, register
 
@@ -29,14 +32,24 @@ def _nearest(queries: np.ndarray, points: np.ndarray, chunk: int = 1024) -> np.n
     return out
 
 
+@dataclass
+class KnnOptions(MethodOptions):
+    """The method's options: checked, shown in ``abco train --method knn-ifo --help``."""
+
+    flag_prefix = "knn-"
+    max_pre: int = option("pre-demonstration transitions used", 5000, min=1)
+
+
 @register("knn-ifo")
 class NearestNeighbourIfO(Method):
-    """BCO(0) with nearest-neighbour IDM and policy (option ``max_pre``: pre-demos used)."""
+    """BCO(0) with nearest-neighbour IDM and policy."""
+
+    Options = KnnOptions
+    options: KnnOptions
 
     def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
-        super().__init__(config, data, rng)
-        max_pre = int(config.method_options.get("max_pre", 5000))
-        keep = rng.permutation(len(data.pre_t))[:max_pre]  # the run's seed picks the subset
+        super().__init__(config, data, rng)  # sets self.options from config.method_options
+        keep = rng.permutation(len(data.pre_t))[: self.options.max_pre]  # the seed picks them
         self.count("pre_demonstration", len(keep))  # the run's cost: pre-demonstrations used
         rows = data.pre_t[keep]
         s = data.pre_obs[rows].astype(np.float64)

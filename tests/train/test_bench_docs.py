@@ -37,7 +37,7 @@ def test_documented_commands_parse() -> None:
     for doc in COMMAND_DOCS:
         for block in _blocks("bash", doc):
             for argv in _commands(block):
-                build_parser().parse_args(argv[1:])
+                build_parser(argv[1:]).parse_args(argv[1:])
 
 
 def test_user_method_beside_abco(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

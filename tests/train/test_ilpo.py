@@ -20,13 +20,13 @@ from abco_train.harness.training_data import load_training_data
 from abco_train.methods.base import INTERACTION_KINDS
 from abco_train.methods.ilpo.method import (
     ILPO,
-    CellAverage,
     ImageForwardModel,
     expected_prediction_loss,
     min_over_latents_loss,
 )
 from abco_train.methods.ilpo.options import OPTION_DEFAULTS, ILPOOptions
 from abco_train.methods.registry import available, resolve_config
+from abco_train.networks.cells import CellAverage
 
 ENVS = (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
 #: A tiny budget: a few gradient steps, a few remapping steps.

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar, cast
+from typing import Any, ClassVar
 
 import abco_envs
 from abco_train.config.fields import ConfigError, MethodOptions, flag_of, option
@@ -78,7 +78,7 @@ class GAIfOOptions(MethodOptions):
         defaults = {**COMMON_OPTIONS, **GAIFO_DEFAULTS[env_kind(config.env)],
                     **GAIFO_DEFAULTS.get(abco_envs.env_name(config.env), {})}  # fmt: skip
         given = config.method_options
-        options = cast("GAIfOOptions", cls.resolve(given, copy.deepcopy(defaults), method))
+        options = cls.resolve(given, copy.deepcopy(defaults), method)
         options.check()
         return options
 

@@ -23,6 +23,8 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs
 from torch import nn
 
 from abco_train.methods.gaifo.options import GAIfOOptions
+from abco_train.networks.encoders import conv_stack
+from abco_train.networks.layers import standardise
 
 __all__ = ["DiscriminatorReward", "Standardize", "SmallCNN", "learner_env", "make_ppo"]
 
@@ -79,21 +81,18 @@ class Standardize(BaseFeaturesExtractor):
         self.register_buffer("std", torch.as_tensor(std, dtype=torch.float32))
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return ((obs.flatten(1) - self.mean) / self.std).clamp(-10.0, 10.0)
+        return standardise(obs.flatten(1), self.mean, self.std).clamp(-10.0, 10.0)
 
 
 class SmallCNN(BaseFeaturesExtractor):
-    """A compact CNN for 64x64 frames (channels first, scaled to [0, 1] by SB3):
-    ``conv 4x4/4 (16) -> conv 3x3/2 (32) -> conv 3x3 (32) -> FC features_dim``."""
+    """The compact CNN's convolutions (:func:`abco_train.networks.encoders.conv_stack`, ReLU,
+    no attention) for 64x64 frames (channels first, scaled to [0, 1] by SB3), then
+    ``FC features_dim``: SB3's feature extractor for the PPO learner."""
 
     def __init__(self, observation_space: gym.spaces.Box, features_dim: int = 256) -> None:
         super().__init__(observation_space, features_dim)
         c, h, w = observation_space.shape
-        self.body = nn.Sequential(
-            nn.Conv2d(c, 16, 4, stride=4), nn.ReLU(),
-            nn.Conv2d(16, 32, 3, stride=2, padding=1), nn.ReLU(),
-            nn.Conv2d(32, 32, 3, padding=1), nn.ReLU(), nn.Flatten(),
-        )  # fmt: skip
+        self.body = conv_stack(c, nn.ReLU, attention=None)  # the compact CNN's convolutions
         with torch.no_grad():
             n = int(self.body(torch.zeros(1, c, h, w)).shape[1])
         self.head = nn.Sequential(nn.Linear(n, features_dim), nn.ReLU())

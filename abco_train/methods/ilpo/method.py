@@ -114,7 +114,6 @@ from abco_train.config.run import RunConfig
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method
 from abco_train.methods.ilpo.networks import (
-    CellAverage,
     ILPONet,
     ImageForwardModel,
     VectorForwardModel,
@@ -127,6 +126,7 @@ from abco_train.methods.ilpo.networks import (
 from abco_train.methods.ilpo.options import ENV_OPTION_DEFAULTS, OPTION_DEFAULTS, ILPOOptions
 from abco_train.methods.ilpo.remapping import ActionRemapping, remapping_steps
 from abco_train.methods.registry import register
+from abco_train.networks.cells import CellAverage
 
 __all__ = ["ILPO", "ILPOOptions", "CellAverage", "ILPONet", "VectorForwardModel",
            "ImageForwardModel", "latent_policy", "min_over_latents_loss",

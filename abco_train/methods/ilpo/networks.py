@@ -2,7 +2,8 @@
 trains them).
 
 The min-over-latents and expected-prediction losses, the latent forward models ``G(E(s), z)``
-for vectors and frames (with :class:`CellAverage` for the maze's cells), the latent policy
+for vectors and frames (with :class:`~abco_train.networks.cells.CellAverage` for the maze's cells),
+the latent policy
 ``pi(z | s)``, the remapping classifier ``P(a | s, z)`` and the minibatches they train on.
 
 What ``G`` predicts (:meth:`abco_train.methods.ilpo.method.ILPO._targets`), and with what:
@@ -26,7 +27,8 @@ What ``G`` predicts (:meth:`abco_train.methods.ilpo.method.ILPO._targets`), and 
 * **Cells** (``target="cells"``, the 10x10 maze's default): a 10x10 maze's cells are 6 or 7
   pixels wide, so a fixed pooling cuts each at another offset and one move's pooled
   difference looks different in every cell. This target is how much each cell changed, the
-  sum of ``|s' - s|`` over the cell's pixels and the channels (:class:`CellAverage`, at the
+  sum of ``|s' - s|`` over the cell's pixels and the channels
+  (:class:`~abco_train.networks.cells.CellAverage`, at the
   renderer's cell borders), one value per cell: a move is the same two cells' change
   wherever it is made, whatever the cells' sizes (and the goal's colour changes only how
   much). ``G`` is then local: ``E`` is a 3x3 convolution at full resolution averaged over
@@ -45,12 +47,12 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from abco_envs.maze.render import cell_edges
+from abco_train.networks.cells import CellAverage
 from abco_train.networks.encoders import CompactCNN
-from abco_train.networks.layers import image_input
+from abco_train.networks.layers import Standardise, image_input
 
-__all__ = ["latent_errors", "min_over_latents_loss", "expected_prediction_loss", "Standardise",
-           "VectorForwardModel", "CellAverage", "ImageForwardModel", "latent_policy",
+__all__ = ["latent_errors", "min_over_latents_loss", "expected_prediction_loss",
+           "VectorForwardModel", "ImageForwardModel", "latent_policy",
            "ILPONet", "RemapNet", "minibatches"]  # fmt: skip
 
 
@@ -112,19 +114,6 @@ def expected_prediction_loss(probs: torch.Tensor, pred: torch.Tensor, target: to
 # -- the networks ---------------------------------------------------------------------------
 
 
-class Standardise(nn.Module):
-    """``(x - mean) / std`` with fixed buffers."""
-
-    def __init__(self, mean: np.ndarray, std: np.ndarray) -> None:
-        super().__init__()
-        self.register_buffer("mean", torch.as_tensor(mean, dtype=torch.float32))
-        self.register_buffer("std", torch.as_tensor(std, dtype=torch.float32))
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Standardised ``x``."""
-        return (x.float() - self.mean) / self.std
-
-
 class VectorForwardModel(nn.Module):
     """``G(E(s), z)`` for vector states: the standardised change each latent action makes.
 
@@ -152,34 +141,6 @@ class VectorForwardModel(nn.Module):
         """``(E(s) of shape (B, F), predictions (B, k, D))``."""
         h = self.embedding(obs)
         return h, self.head(self.state(h).unsqueeze(1) + self.latent)
-
-
-class CellAverage(nn.Module):
-    """The mean (``total``: the sum) of a ``(B, C, H, W)`` map over each cell of an
-    ``n x n`` maze: ``(B, C, n, n)``.
-
-    Cell borders fall where the renderer draws them (:func:`abco_envs.maze.render.cell_edges`),
-    so every cell takes exactly its own pixels
-    (``target="cells"``, module docstring).
-    """
-
-    def __init__(self, grid: int, height: int, width: int, total: bool = False) -> None:
-        super().__init__()
-        self.grid = int(grid)
-        self.register_buffer("rows", self._means(grid, height, total), persistent=False)
-        self.register_buffer("cols", self._means(grid, width, total), persistent=False)
-
-    @staticmethod
-    def _means(grid: int, size: int, total: bool) -> torch.Tensor:
-        """``(grid, size)``: row ``i`` averages (``total``: sums) the pixels of band ``i``."""
-        edges = cell_edges(grid, size)
-        m = np.zeros((grid, size), dtype=np.float32)
-        for i in range(grid):
-            m[i, edges[i] : edges[i + 1]] = 1.0 if total else 1.0 / (edges[i + 1] - edges[i])
-        return torch.from_numpy(m)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.rows @ x @ self.cols.T
 
 
 class ImageForwardModel(nn.Module):

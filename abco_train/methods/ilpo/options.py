@@ -101,7 +101,7 @@ class ILPOOptions(MethodOptions):
         """
         name, kind = abco_envs.env_name(config.env), env_kind(config.env)
         defaults = {**OPTION_DEFAULTS[kind], **ENV_OPTION_DEFAULTS.get(name, {})}
-        options = typing.cast(ILPOOptions, cls.resolve(config.method_options, defaults, method))
+        options = cls.resolve(config.method_options, defaults, method)
         options.check(config)
         if options.latents is None:
             options.latents = ACTION_COUNTS[name]
