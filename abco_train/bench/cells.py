@@ -19,14 +19,15 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from abco_train.config.run import ConfigError
+from abco_train.config.run import ConfigError, RunConfig
+from abco_train.methods.registry import options_class
 
 __all__ = ["Cell", "CELL_FIELDS", "parse_seeds", "parse_list", "parse_layouts", "plan",
-           "cell_config"]  # fmt: skip
+           "cell_config", "check_method_options"]  # fmt: skip
 
 #: Config fields the grid sets per cell (never trainer overrides).
 CELL_FIELDS = ("env", "method", "seed", "layouts", "run_dir", "quiet", "threads",
@@ -129,9 +130,12 @@ def cell_config(
     Args:
         cell: The cell.
         out: The grid's folder.
-        overrides: Trainer settings applied to every cell (``None`` values are dropped).
+        overrides: Trainer settings applied to every cell (``None`` values are dropped); a
+            method's option given here (``idm_epochs``) counts as one of ``method_options``.
         threads: Torch threads of the cell.
-        method_options: ``RunConfig.method_options`` of every cell.
+        method_options: Method options for every cell whose method has them (a grid of
+            several methods gives each its own; :func:`check_method_options` refuses an
+            option that no method of the grid has).
 
     Raises:
         ConfigError: An override of a per-cell field (env, method, seed, run_dir, ...).
@@ -140,9 +144,33 @@ def cell_config(
     clash = sorted(set(overrides) & set(CELL_FIELDS))
     if clash:
         raise ConfigError(f"the grid sets {', '.join(clash)} per cell; not an override")
+    settings = {f.name for f in fields(RunConfig)}
+    options = {**{k: v for k, v in overrides.items() if k not in settings},
+               **(method_options or {})}  # fmt: skip
+    own = options_class(cell.method).names()
     return {
-        **overrides, "env": cell.env, "method": cell.method, "seed": cell.seed,
+        **{k: v for k, v in overrides.items() if k in settings},
+        "env": cell.env, "method": cell.method, "seed": cell.seed,
         **({"layouts": cell.layouts} if cell.layouts is not None else {}),
         "run_dir": str(cell.run_dir(out)), "quiet": True, "threads": int(threads),
-        "method_options": dict(method_options or {}),
+        "method_options": {k: v for k, v in options.items() if k in own},
     }  # fmt: skip
+
+
+def check_method_options(methods: Sequence[str], overrides: dict[str, Any] | None,
+                         method_options: dict[str, Any] | None) -> None:  # fmt: skip
+    """Refuse a setting that is neither the run config's nor an option of some method of the
+    grid (a typo would otherwise be dropped by every cell).
+
+    Raises:
+        ConfigError: The unknown names, and the options the grid's methods have.
+    """
+    settings = {f.name for f in fields(RunConfig)}
+    given = {k for k, v in (overrides or {}).items() if v is not None and k not in settings}
+    given |= set(method_options or {})
+    known = {name for m in set(methods) for name in options_class(m).names()}
+    unknown = sorted(given - known)
+    if unknown:
+        raise ConfigError(f"no method of the grid ({', '.join(sorted(set(methods)))}) has "
+                          f"option(s) {', '.join(unknown)}; theirs: "
+                          f"{', '.join(sorted(known)) or 'none'}")  # fmt: skip

@@ -42,6 +42,7 @@ from abco_train.bench.cells import (
     CELL_FIELDS,
     Cell,
     cell_config,
+    check_method_options,
     parse_layouts,
     parse_list,
     parse_seeds,
@@ -107,8 +108,9 @@ def run_grid(
     Args:
         cells: The grid (:func:`plan`).
         out: The grid's folder.
-        overrides: Trainer settings for every cell (``RunConfig`` fields).
-        method_options: ``RunConfig.method_options`` of every cell.
+        overrides: Trainer settings for every cell (``RunConfig`` fields, or a method's
+            options, which go to the cells whose method has them).
+        method_options: Method options, for every cell whose method has them.
         plugins: Modules or ``.py`` files to import first (in every worker too).
         backend: ``local`` (processes) or ``ray``.
         jobs: Cells at once (local default: the cores; ray default: as the cluster allows).
@@ -124,6 +126,7 @@ def run_grid(
             another config.
     """
     _check_backend_and_methods(backend, cells, plugins)
+    check_method_options([c.method for c in cells], overrides, method_options)
     cores = backends.available_cores()
     local_jobs = max(1, jobs or cores)
     threads = int(threads or max(1, cores // local_jobs))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 import shlex
+from dataclasses import fields
 from pathlib import Path
 
 import pytest
@@ -12,6 +13,7 @@ from test_bench_grid import tiny_overrides
 from abco_train.bench import grid as bench
 from abco_train.cli import build_parser
 from abco_train.cli import main as abco_main
+from abco_train.config.run import RunConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "plugins.md"
@@ -46,11 +48,16 @@ def test_user_method_beside_abco(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     (tmp_path / "docs" / "examples").mkdir(parents=True)
     (tmp_path / "docs" / "examples" / "my_method.py").write_text(EXAMPLE.read_text())
     tiny = [f"--{k.replace('_', '-')}={v}" for k, v in overrides.items()]
+    # knn-ifo has no IDM: its own run takes the run config's settings only (a grid routes
+    # the BCO family's options to the abco cells)
+    settings = {f.name for f in fields(RunConfig)}
+    tiny_own = [f"--{k.replace('_', '-')}={v}" for k, v in overrides.items() if k in settings]
     mine = [argv for argv in _commands(_blocks("bash")[-1])]
     assert [argv[1] for argv in mine] == ["train", "bench", "report"]
     for argv in mine:  # the same plugin file through `abco train` and `abco bench`
         if argv[1] in ("train", "bench"):  # fewer seeds, a tiny budget, else as written
-            argv = [a if a != "0-4" else "0" for a in argv] + tiny + ["--quiet", "--threads=1"]
+            extra = tiny if argv[1] == "bench" else tiny_own
+            argv = [a if a != "0-4" else "0" for a in argv] + extra + ["--quiet", "--threads=1"]
         assert abco_main(argv[1:]) == 0
     assert (tmp_path / "runs" / "knn" / "final.json").exists()
     md = (tmp_path / "runs" / "mine" / "report" / "report.md").read_text()

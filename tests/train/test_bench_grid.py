@@ -15,7 +15,7 @@ from abco_train.cli import main as abco_main
 from abco_train.methods.base import INTERACTION_KINDS
 from abco_train.report import published as paper
 
-TINY_TRAINING = {"iterations": 1, "eval_episodes": 3}
+TINY_TRAINING = {"iterations": 1, "idm_epochs": 1, "policy_epochs": 1, "eval_episodes": 3}
 
 
 def tiny_overrides(directory: Path) -> dict[str, Any]:
@@ -111,7 +111,7 @@ def test_rerun_skips_finished_cells(grid: dict[str, Any]) -> None:
 
 
 def test_finished_cell_of_another_config_is_refused(grid: dict[str, Any]) -> None:
-    changed = {**grid["overrides"], "iterations": 2}
+    changed = {**grid["overrides"], "idm_epochs": 2}  # a method option is the cell's too
     with pytest.raises(ValueError, match="another config"):
         bench.run_grid(CELLS, grid["out"], overrides=changed, threads=1, quiet=True)
 
