@@ -176,6 +176,19 @@ def dataset_id(env_id: str, kind: str) -> str:
     return f"abco/{name}-{_KIND_SUFFIX[_normalise_kind(kind)]}-v{VERSION}"
 
 
+def _variant_id(env_id: str, envs: tuple[str, ...], what: str, suffix: str) -> str:
+    """``abco/{name}-{suffix}-v{VERSION}`` of a dataset variant that only ``envs`` have.
+
+    Raises:
+        UnknownDatasetError: ``env_id`` is not one of ``envs`` (the message names them).
+    """
+    name = abco_envs.env_name(env_id)
+    if name not in envs:
+        raise UnknownDatasetError(f"no {what} abco dataset for env {env_id!r}; envs with one: "
+                                  f"{', '.join(envs)}")  # fmt: skip
+    return f"abco/{ENV_NAMES[name]}-{suffix}-v{VERSION}"
+
+
 def procedural_dataset_id(env_id: str, kind: str) -> str:
     """The id of the procedural ``kind`` dataset of ``env_id`` (mazes 5x5 and 10x10).
 
@@ -187,12 +200,8 @@ def procedural_dataset_id(env_id: str, kind: str) -> str:
         UnknownDatasetError: No procedural dataset exists for ``env_id``.
         ValueError: Unknown ``kind``.
     """
-    name = abco_envs.env_name(env_id)
-    if name not in PROCEDURAL_ENVS:
-        raise UnknownDatasetError(f"no procedural abco dataset for env {env_id!r}; envs with"
-                                  f" procedural datasets: {', '.join(PROCEDURAL_ENVS)}")
     suffix = _KIND_SUFFIX[_normalise_kind(kind)]
-    return f"abco/{ENV_NAMES[name]}-procedural-{suffix}-v{VERSION}"
+    return _variant_id(env_id, PROCEDURAL_ENVS, "procedural", f"procedural-{suffix}")
 
 
 def start_cell_dataset_id(env_id: str) -> str:
@@ -205,10 +214,7 @@ def start_cell_dataset_id(env_id: str) -> str:
     Raises:
         UnknownDatasetError: ``env_id`` is not an abco maze.
     """
-    name = abco_envs.env_name(env_id)
-    if not is_maze(name) or name not in ENV_NAMES:
-        raise UnknownDatasetError(f"no start-cell abco dataset for env {env_id!r}; mazes only")
-    return f"abco/{ENV_NAMES[name]}-pre-start-v{VERSION}"
+    return _variant_id(env_id, abco_envs.MAZE_IDS, "start-cell", "pre-start")
 
 
 def held_dataset_id(env_id: str) -> str:
@@ -221,11 +227,7 @@ def held_dataset_id(env_id: str) -> str:
     Raises:
         UnknownDatasetError: No held-action dataset exists for ``env_id``.
     """
-    name = abco_envs.env_name(env_id)
-    if name not in HELD_ENVS:
-        raise UnknownDatasetError(f"no held-action abco dataset for env {env_id!r}; envs with"
-                                  f" one: {', '.join(HELD_ENVS)}")
-    return f"abco/{ENV_NAMES[name]}-pre-held-v{VERSION}"
+    return _variant_id(env_id, HELD_ENVS, "held-action", "pre-held")
 
 
 def _build() -> dict[str, DatasetSpec]:

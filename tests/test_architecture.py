@@ -138,3 +138,26 @@ def test_no_private_name_crosses_a_module(module: str) -> None:
     private = [f"{target}.{name}" for target, name in _imports(module)
                if name and name.startswith("_") and not name.startswith("__") and target != module]
     assert private == []
+
+
+#: Rooms of a size a reader can hold: modules of at most ~400 lines, functions that fit a
+#: screen, and a package's top level that shows its subpackages rather than hiding them.
+MAX_MODULE_LINES, MAX_FUNCTION_LINES, MAX_TOP_LEVEL_MODULES = 420, 85, 8
+
+
+@pytest.mark.parametrize("module", sorted(MODULES))
+def test_modules_and_functions_fit(module: str) -> None:
+    source = MODULES[module].read_text()
+    assert len(source.splitlines()) <= MAX_MODULE_LINES
+    long = [f"{node.name}: {(node.end_lineno or 0) - node.lineno + 1} lines"
+            for node in ast.walk(ast.parse(source))
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+            and (node.end_lineno or 0) - node.lineno + 1 > MAX_FUNCTION_LINES]
+    assert long == []
+
+
+def test_the_trainer_shows_its_rooms() -> None:
+    top = sorted(p.name for p in (ROOT / "abco_train").glob("*.py"))
+    rooms = sorted(p.parent.name for p in (ROOT / "abco_train").glob("*/__init__.py"))
+    assert len(top) <= MAX_TOP_LEVEL_MODULES, top
+    assert rooms == ["bench", "config", "harness", "methods", "networks", "report"]

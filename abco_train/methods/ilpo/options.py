@@ -135,25 +135,17 @@ class ILPOOptions(MethodOptions):
 #: ``G`` (``policy_steps`` 1000; :mod:`abco_train.methods.ilpo.method`): trained together,
 #: ``pi`` saturated on one latent in most 5x5 seeds (docs/training.md, validation seeds
 #: 100-107).
+_CLASSIC_DEFAULTS: dict[str, Any] = {
+    "latents": None, "train_steps": 3000, "policy_steps": None, "later_steps": 0,
+    "hidden": 64, "channels": 16, "pool": 1, "target": "pooled", "exp_weight": 0.0,
+    "relax": 0.0, "latent_init": "random", "split_noise": 0.01, "remap": "state",
+    "remap_input": "effect+embedding", "remap_steps": 500, "remap_envs": 10,
+    "remap_epsilon": 0.2, "remap_margin": 0.1, "remap_epochs": 20, "remap_max_steps": None,
+}  # fmt: skip
 OPTION_DEFAULTS: dict[str, dict[str, Any]] = {
-    "classic": {
-        "latents": None, "train_steps": 3000, "policy_steps": None, "later_steps": 0,
-        "hidden": 64, "channels": 16, "pool": 1, "target": "pooled", "exp_weight": 0.0,
-        "relax": 0.0,
-        "latent_init": "random", "split_noise": 0.01, "remap": "state",
-        "remap_input": "effect+embedding",
-        "remap_steps": 500, "remap_envs": 10, "remap_epsilon": 0.2, "remap_margin": 0.1,
-        "remap_epochs": 20, "remap_max_steps": None,
-    },
-    "maze": {
-        "latents": None, "train_steps": 1300, "policy_steps": 1000, "later_steps": 0,
-        "hidden": 128, "channels": 16, "pool": 4, "target": "pooled", "exp_weight": 0.0,
-        "relax": 0.0,
-        "latent_init": "random", "split_noise": 0.01, "remap": "state",
-        "remap_input": "effect+embedding",
-        "remap_steps": 1000, "remap_envs": 50, "remap_epsilon": 0.2, "remap_margin": 0.5,
-        "remap_epochs": 20, "remap_max_steps": None,
-    },
+    "classic": _CLASSIC_DEFAULTS,
+    "maze": {**_CLASSIC_DEFAULTS, "train_steps": 1300, "policy_steps": 1000, "hidden": 128,
+             "pool": 4, "remap_steps": 1000, "remap_envs": 50, "remap_margin": 0.5},
 }  # fmt: skip
 
 #: Per-environment changes on top of :data:`OPTION_DEFAULTS`.
