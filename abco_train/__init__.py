@@ -8,7 +8,10 @@ its modules do. A trained policy: ``abco_train.load_policy(run_dir)``
 (:mod:`abco_train.harness.trained_policy`).
 """
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # provided lazily by ``__getattr__`` below (it imports torch)
+    from abco_train.harness.trained_policy import Policy, load_policy
 
 
 def _version() -> str:

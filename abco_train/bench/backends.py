@@ -6,7 +6,8 @@ work function's row, or the exception that killed its worker. It knows nothing o
 results files or configs; the grid runner (:mod:`abco_train.bench.grid`) owns those.
 
 * ``local`` (default): parallel processes (:class:`concurrent.futures.ProcessPoolExecutor`,
-  spawn context, one fresh process per cell).
+  spawn context, one fresh process per cell; on Python 3.10, which cannot ask for that, a
+  worker may run several cells in turn, each seeded on its own).
 * ``ray``: the same cells as Ray tasks (``pip install abco[ray]``), joining the cluster at
   ``address`` or starting a local Ray instance, each task asking for its cell's threads as
   CPUs.
@@ -14,7 +15,9 @@ results files or configs; the grid runner (:mod:`abco_train.bench.grid`) owns th
 
 from __future__ import annotations
 
+import logging
 import os
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
@@ -45,7 +48,11 @@ def run_local(work: Work, tasks: list[dict[str, Any]], plugins: Sequence[str], j
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, max_tasks_per_child=1) as pool:
+    if sys.version_info >= (3, 11):
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, max_tasks_per_child=1)
+    else:  # Python 3.10 has no max_tasks_per_child: a worker process may run several cells
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx)
+    with pool:
         futures = {pool.submit(work, t, tuple(plugins)): i for i, t in enumerate(tasks)}
         for future in as_completed(futures):
             try:
@@ -64,10 +71,10 @@ def run_ray(work: Work, tasks: list[dict[str, Any]], plugins: Sequence[str], job
     started = not ray.is_initialized()
     if started:
         if address:
-            ray.init(address=address, logging_level="WARNING")
+            ray.init(address=address, logging_level=logging.WARNING)
         else:
             ray.init(num_cpus=available_cores(), include_dashboard=False,
-                     logging_level="WARNING")  # fmt: skip
+                     logging_level=logging.WARNING)  # fmt: skip
     try:
         pending: dict[Any, int] = {}
         remotes: dict[int, Any] = {}  # one remote function per CPU request

@@ -223,6 +223,17 @@ class MethodOptions:
         check_fields(options, cls.flag_prefix)
         return options
 
+    @classmethod
+    def for_run(cls, config: Any, method: str) -> Self:
+        """The options of a run (``config``: its :class:`~abco_train.config.run.RunConfig`):
+        its ``method_options`` over the fields' defaults. Options whose defaults depend on the
+        environment override this with their tables.
+
+        Raises:
+            ConfigError: An unknown option or a value that does not fit.
+        """
+        return cls.resolve(config.method_options, {}, method)
+
     def to_dict(self) -> dict[str, Any]:
         """The options as a JSON-ready dict."""
         return asdict(self)

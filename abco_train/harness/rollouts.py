@@ -229,9 +229,9 @@ def _collect(tally: _Tally, first_obs: np.ndarray | None,
     out = Rollouts(tally.returns, tally.successes, lengths, tally.layout_indices,
                    tally.layout_ids)  # fmt: skip
     if tally.maze:
-        out.paths = _per_run(num, tally.first_pos, [(a, p) for a, _, _, p in steps])
+        out.paths = _per_run(num, tally.first_pos, [(a, _recorded(p)) for a, _, _, p in steps])
     if first_obs is not None:
-        run_obs = _per_run(num, first_obs, [(a, o) for a, o, _, _ in steps])
+        run_obs = _per_run(num, first_obs, [(a, _recorded(o)) for a, o, _, _ in steps])
         run_acts = _per_run(num, None, [(a, x) for a, _, x, _ in steps])
         starts = np.concatenate([[0], np.cumsum(lengths + 1)[:-1]])
         out.observations = np.concatenate(run_obs)
@@ -239,6 +239,13 @@ def _collect(tally: _Tally, first_obs: np.ndarray | None,
         out.run_ids = np.repeat(np.arange(num), lengths)
         out.obs_t = np.concatenate([s + np.arange(t) for s, t in zip(starts, lengths)])
     return out
+
+
+def _recorded(rows: np.ndarray | None) -> np.ndarray:
+    """A step's recorded rows: positions (mazes) and observations (``record``) are kept at
+    every step of a rollout that keeps them at all."""
+    assert rows is not None, "a step of a recorded rollout without its rows"
+    return rows
 
 
 def _per_run(

@@ -20,7 +20,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -95,6 +95,7 @@ def load_policy(run_dir: str | os.PathLike[str], *, device: str = "cpu", quiet: 
         raise RunFolderError(f"{run_dir / CONFIG} holds no config abco can read: {exc}") from None
     cfg = cfg.replace(run_dir=str(run_dir), quiet=quiet, device=resolve_device(device))
     state = load_checkpoint(run_dir / CHECKPOINT, cfg.device)
+    assert state is not None, f"{run_dir / CHECKPOINT} vanished"  # it existed just above
     rng = seed_everything(cfg.seed, cfg.threads, cfg.deterministic)
     data = load_training_data(cfg)
     method = get_method(cfg.method)(cfg, data, rng)
@@ -143,7 +144,8 @@ def record_gif(
     for episode in tqdm(list(episodes), desc="episodes", disable=not progress, unit="ep"):
         options = {"layout_index": int(episode), "start": (0, 0)} if maze else None
         obs, _ = env.reset(seed=int(episode), options=options)
-        shot = (lambda o: o) if maze else (lambda o: env.render())
+        # gymnasium types render() by render mode; "rgb_array" gives one frame, an array
+        shot = (lambda o: o) if maze else (lambda o: cast(np.ndarray, env.render()))
         frames.append(_upscale(shot(obs)))
         for _ in range(max_steps):
             obs, _, terminated, truncated, _ = env.step(policy(obs))

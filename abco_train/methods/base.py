@@ -115,13 +115,13 @@ class Method(ABC):
 
     @classmethod
     def resolve_options(cls, config: RunConfig) -> MethodOptions:
-        """The run's options: ``config.method_options`` over the method's defaults for the
-        run (none here; a method with default tables overrides this).
+        """The run's options (:meth:`MethodOptions.for_run` of :attr:`Options`):
+        ``config.method_options`` over the defaults for the run.
 
         Raises:
             ConfigError: An unknown option or a value that does not fit.
         """
-        return cls.Options.resolve(config.method_options, {}, config.method)
+        return cls.Options.for_run(config, config.method)
 
     @property
     def num_iterations(self) -> int:

@@ -13,7 +13,7 @@ import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from abco_train.config.fields import MethodOptions
 from abco_train.config.run import MOVED_TO_METHOD_OPTIONS, ConfigError, RunConfig, comparable
@@ -33,15 +33,18 @@ BUILTIN_MODULES = (
 
 _REGISTRY: dict[str, type[Method]] = {}
 
+#: A method class: :func:`register` hands back the class it was given, its type kept.
+_MethodClass = TypeVar("_MethodClass", bound="type[Method]")
+
 
 class PluginError(ImportError):
     """A ``--plugin`` that cannot be imported; the message names it and the reason."""
 
 
-def register(*names: str) -> Callable[[type[Method]], type[Method]]:
+def register(*names: str) -> Callable[[_MethodClass], _MethodClass]:
     """Class decorator: make a :class:`Method` available under ``names``."""
 
-    def decorate(cls: type[Method]) -> type[Method]:
+    def decorate(cls: _MethodClass) -> _MethodClass:
         for name in names:
             _REGISTRY[name] = cls
         return cls

@@ -55,10 +55,17 @@ class NetworkSpec:
         return self.idm_input == "difference"
 
     @property
-    def idm_shape(self) -> tuple[int, ...]:
+    def idm_shape(self) -> tuple[int, int, int]:
         """The IDM encoder's input: frame and difference channels, or one frame."""
-        h, w, c = self.shape
-        return (h, w, 2 * c) if self.fused else self.shape
+        h, w, c = _image_shape(self.shape)
+        return (h, w, 2 * c) if self.fused else (h, w, c)
+
+
+def _image_shape(shape: tuple[int, ...]) -> tuple[int, int, int]:
+    """``(H, W, C)``: the shape of image observations (:func:`build_networks` checks that
+    they have three sides)."""
+    h, w, c = shape
+    return h, w, c
 
 
 def _vector_networks(spec: NetworkSpec) -> tuple[PolicyNet, IDMNet]:
@@ -91,7 +98,8 @@ def _cell_networks(spec: NetworkSpec) -> tuple[PolicyNet, IDMNet]:
     if spec.grid is None or not spec.fused:
         raise ValueError(f"arch {spec.arch!r} needs the maze's grid size and idm_input "
                          "'difference'")  # fmt: skip
-    pm_enc = CellNet(spec.shape, spec.grid, spec.attention, plan=spec.arch == "cellplan")
+    pm_enc = CellNet(_image_shape(spec.shape), spec.grid, spec.attention,
+                     plan=spec.arch == "cellplan")  # fmt: skip
     # The IDM's move is local (two neighbouring cells): two steps see both cells.
     idm_enc = CellNet(spec.idm_shape, spec.grid, spec.attention,
                       iterations=CELLNET_IDM_ITERATIONS)  # fmt: skip
@@ -105,8 +113,8 @@ def _cell_networks(spec: NetworkSpec) -> tuple[PolicyNet, IDMNet]:
 
 def _compact_networks(spec: NetworkSpec) -> tuple[PolicyNet, IDMNet]:
     """``cnn``: the compact CNN (CPU default for frames)."""
-    pm_enc, idm_enc = CompactCNN(spec.shape, spec.attention), CompactCNN(spec.idm_shape,
-                                                                         spec.attention)
+    pm_enc = CompactCNN(_image_shape(spec.shape), spec.attention)
+    idm_enc = CompactCNN(spec.idm_shape, spec.attention)
     idm_features = idm_enc.out_features * (1 if spec.fused else 2)
     pm_head = small_head(pm_enc.out_features, spec.n_actions)
     idm_head = small_head(idm_features, spec.n_actions)
@@ -115,8 +123,8 @@ def _compact_networks(spec: NetworkSpec) -> tuple[PolicyNet, IDMNet]:
 
 def _resnet_networks(spec: NetworkSpec) -> tuple[PolicyNet, IDMNet]:
     """``resnet18``: the paper's image networks with its dropout heads."""
-    pm_enc, idm_enc = ResNet18(spec.shape, spec.attention), ResNet18(spec.idm_shape,
-                                                                     spec.attention)
+    pm_enc = ResNet18(_image_shape(spec.shape), spec.attention)
+    idm_enc = ResNet18(spec.idm_shape, spec.attention)
     idm_features = idm_enc.out_features * (1 if spec.fused else 2)
     return (
         PolicyNet(pm_enc, action_head(512, 512, spec.n_actions, spec.dropout)),

@@ -48,6 +48,9 @@ class CellAverage(nn.Module):
     networks' convolutions have already spread a cell's content there.)
     """
 
+    rows: torch.Tensor  # the buffers, typed (register_buffer sets them)
+    cols: torch.Tensor
+
     def __init__(self, grid: int, height: int, width: int, total: bool = False) -> None:
         super().__init__()
         self.grid = int(grid)
@@ -186,6 +189,8 @@ class CellNet(nn.Module):
         iterations: Recurrent steps (default ``2 * grid``).
         plan: Add the value-iteration planner's 4 features (last).
     """
+
+    centres: torch.Tensor  # the buffer, typed (register_buffer sets it)
 
     def __init__(self, image_shape: tuple[int, int, int], grid: int, attention: bool = True,
                  channels: int = 32, iterations: int | None = None,

@@ -67,6 +67,9 @@ class Standardise(nn.Module):
     """``(x - mean) / std`` with fixed buffers ``mean`` and ``std`` (statistics of the data,
     saved with the network's state)."""
 
+    mean: torch.Tensor  # the buffers, typed (register_buffer sets them)
+    std: torch.Tensor
+
     def __init__(self, mean: np.ndarray, std: np.ndarray) -> None:
         super().__init__()
         self.register_buffer("mean", torch.as_tensor(mean, dtype=torch.float32))

@@ -282,7 +282,7 @@ def separation(means: Mapping[str, Mapping[str, float]], envs: Sequence[str],
         found = {m: p for m, p in means.get(env, {}).items() if np.isfinite(p)}
         if len(found) < 2:
             continue
-        lo, hi = min(found, key=found.get), max(found, key=found.get)
+        lo, hi = min(found, key=found.__getitem__), max(found, key=found.__getitem__)
         spread = found[hi] - found[lo]
         if spread <= tol:
             saturated.append(env)

@@ -61,7 +61,7 @@ def generalisation_cells(runs: Sequence[Run]) -> Cells:
     empty when the grid has neither of the first two.
     """
     done = [r for r in runs if r.status == "ok" and r.final is not None]
-    special = [r for r in done if r.layouts is not None or "fresh/paper" in r.final]  # type: ignore[operator]
+    special = [r for r in done if r.layouts is not None or "fresh/paper" in (r.final or {})]
     pairs = {(r.env, r.method) for r in special}
     cells: Cells = {}
     for r in done:

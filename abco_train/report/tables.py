@@ -83,7 +83,7 @@ def stat_row(table: str, env: str, method: str, evaluation: str, metric: str,
     }  # fmt: skip
 
 
-def table(grid: Grid, rows: list[tuple[str, str, str, tuple[float | None, float] | None]],
+def table(grid: Grid, rows: Sequence[tuple[str, str, str, tuple[float | None, float] | None]],
           split: str, csv_rows: list[dict[str, Any]], name: str, counts: bool = False,
           ) -> list[str]:  # fmt: skip
     """Markdown rows ``(env, method, label, published (P, AER))``; CSV rows appended.
@@ -221,7 +221,7 @@ def missing(grid: Grid) -> list[str]:
                  f" main table's methods on the {len(TABLE1_ENVS)} environments, Table 2's on"
                  f" {TABLE2_ENV}; {seed_text(seeds)}):"]  # fmt: skip
         for envs, methods in never.items():
-            where = f"{len(envs)} envs" if len(envs) > 1 else envs[0]
+            where = envs[0] if len(envs) == 1 else f"{len(envs)} envs"
             lines.append(f"- no finished run at all: {', '.join(methods)} ({where} ×"
                          f" {seed_text(seeds)}, {_cells(len(envs) * len(seeds) * len(methods))})")
         lines += partly

@@ -245,7 +245,7 @@ def _write(out: Path, md: list[str], csv_rows: list[dict[str, Any]],
     files["report"].write_text("\n".join(md) + "\n")
     files["csv"] = out / "results.csv"
     with files["csv"].open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+        writer: csv.DictWriter[str] = csv.DictWriter(f, fieldnames=CSV_FIELDS)
         writer.writeheader()
         writer.writerows(csv_rows)
     return files

@@ -59,7 +59,7 @@ attention), ``abco-whole`` (attention + whole sampling).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import torch
@@ -83,6 +83,16 @@ DEAD_MARGIN = 0.05
 #: transitions (tiny test datasets) chance and a working IDM cannot be told apart.
 MIN_JUDGED = 200
 
+_T = TypeVar("_T")
+
+
+def _resolved(value: _T | None) -> _T:
+    """A setting that is ``None`` only before resolution: the run config's (``iterations``,
+    ``batch_size``, ``lr``) and the schedule options ``BCOOptions.for_run`` fills in
+    (``idm_input``, ``idm_epochs``, ``idm_patience``, ``idm_samples``, ``policy_epochs``,
+    ``first_epochs_factor``)."""
+    assert value is not None, "a setting read before the config and options were resolved"
+    return value
 
 
 @register(*VARIANTS)
@@ -100,11 +110,6 @@ class BCOFamily(Method):
         """The variant's attention switch (``--attention`` overrides it)."""
         return {"attention": cls.variant(name)["attention"]}
 
-    @classmethod
-    def resolve_options(cls, config: RunConfig) -> BCOOptions:
-        """The run's :class:`~abco_train.methods.bco.options.BCOOptions`."""
-        return BCOOptions.for_run(config, config.method)
-
     Options = BCOOptions
     options: BCOOptions
 
@@ -113,7 +118,7 @@ class BCOFamily(Method):
         variant = self.variant(config.method)
         self.idm_data, self.iterative = variant["idm_data"], variant["iterative"]
         # -- networks (mean/std of the states standardise vector inputs) ----------------------
-        stats: dict[str, np.ndarray] = {}
+        stats: dict[str, Any] = {}
         if len(data.observation_space.shape) == 1:
             states = data.pre_obs.astype(np.float64)
             deltas = states[data.pre_t + 1] - states[data.pre_t]
@@ -125,14 +130,14 @@ class BCOFamily(Method):
         self.augment = self.options.augment == "transpose"
         self.policy, self.idm = build_networks(
             data.observation_space, data.n_actions, config.arch, bool(config.attention),
-            self.options.idm_input, **stats,
+            _resolved(self.options.idm_input), **stats,
         )
         # Networks live on the run's device; the data stays in CPU memory and travels to the
         # device one batch at a time (a maze's frames need not fit in GPU memory).
         self.device = torch.device(config.device)
         self.policy, self.idm = self.policy.to(self.device), self.idm.to(self.device)
-        self.policy_opt = torch.optim.Adam(self.policy.parameters(), lr=config.lr)
-        self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=config.lr)
+        self.policy_opt = torch.optim.Adam(self.policy.parameters(), lr=_resolved(config.lr))
+        self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=_resolved(config.lr))
         # -- data as torch tensors (no copies) ------------------------------------------------
         self.pre_obs = torch.from_numpy(data.pre_obs)
         if self.idm_data is None:  # BC has no IDM to measure
@@ -163,16 +168,17 @@ class BCOFamily(Method):
     @property
     def num_iterations(self) -> int:
         """``alpha + 1`` for iterative variants, else 1."""
-        return int(self.config.iterations) + 1 if self.iterative else 1
+        return int(_resolved(self.config.iterations)) + 1 if self.iterative else 1
 
     # -- Algorithm 1, one iteration ---------------------------------------------------------
 
     def train_iteration(self, iteration: int) -> dict[str, float]:
         """Improve the IDM on ``I_s``, label the expert pairs, clone them into the policy."""
         cfg, stats = self.config, {}
-        boost = self.options.first_epochs_factor if iteration == 0 else 1
+        factor = _resolved(self.options.first_epochs_factor)
+        boost = factor if iteration == 0 else 1
         # One-iteration variants get the iterative ones' whole policy budget (equal epochs).
-        units = boost if self.iterative else self.options.first_epochs_factor + cfg.iterations
+        units = boost if self.iterative else factor + _resolved(cfg.iterations)
         policy_epochs, policy_updates = self._policy_budget(units)
         expert_n = len(self.expert_t)
         true = torch.from_numpy(self.data.expert_eval_actions)
@@ -181,7 +187,7 @@ class BCOFamily(Method):
         else:
             if iteration == 0 or self.idm_data != "pre":
                 idm_set = len(self.s_pre) + len(self.s_pos)
-                idm_epochs = self._floored(self.options.idm_epochs, idm_set)
+                idm_epochs = self._floored(_resolved(self.options.idm_epochs), idm_set)
                 stats.update(self._train_idm_checked(idm_epochs * boost, iteration))
                 stats["idm_samples"] = int(len(self.s_pre) + len(self.s_pos))
             labels = predict(self.idm, self._expert_pairs, expert_n, device=self.device)
@@ -189,8 +195,8 @@ class BCOFamily(Method):
         self.labels = labels.numpy()
         stats["policy_loss"] = fit(
             self.policy, self.policy_opt, lambda idx: (self.expert_obs[self.expert_t[idx]],),
-            labels, policy_epochs, cfg.batch_size, self.rng, "policy", cfg.quiet, self.device,
-            self.augment, policy_updates,
+            labels, policy_epochs, _resolved(cfg.batch_size), self.rng, "policy", cfg.quiet,
+            self.device, self.augment, policy_updates,
         )  # fmt: skip
         stats["policy_epochs"] = policy_epochs
         stats["policy_updates"] = policy_updates
@@ -203,8 +209,8 @@ class BCOFamily(Method):
         """Epochs and minibatch updates of ``units`` policy units: ``policy_epochs`` each
         (floored with ``min_updates``), a unit cut to ``max_updates`` updates where one makes
         more (the last epoch then stops part-way)."""
-        per_epoch = -(-len(self.expert_t) // self.config.batch_size)
-        epochs = self._floored(self.options.policy_epochs, len(self.expert_t))
+        per_epoch = -(-len(self.expert_t) // _resolved(self.config.batch_size))
+        epochs = self._floored(_resolved(self.options.policy_epochs), len(self.expert_t))
         per_unit = epochs * per_epoch
         if self.options.max_updates:
             per_unit = min(per_unit, self.options.max_updates)
@@ -216,7 +222,7 @@ class BCOFamily(Method):
         least = self.options.min_updates
         if not least or not examples:
             return epochs
-        per_epoch = -(-examples // self.config.batch_size)
+        per_epoch = -(-examples // _resolved(self.config.batch_size))
         return max(epochs, -(-least // per_epoch))
 
     def _expert_pairs(self, idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -266,9 +272,9 @@ class BCOFamily(Method):
     def _new_idm(self) -> None:
         _, idm = build_networks(self.data.observation_space, self.data.n_actions,
                                 self.config.arch, bool(self.config.attention),
-                                self.options.idm_input, **self.net_stats)  # fmt: skip
+                                _resolved(self.options.idm_input), **self.net_stats)  # fmt: skip
         self.idm = idm.to(self.device)
-        self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=self.config.lr)
+        self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=_resolved(self.config.lr))
 
     def _train_idm(self, max_epochs: int) -> tuple[float, int]:
         """Epochs of the IDM over ``I_s = I_pre[s_pre] + I_pos[s_pos]`` until the held-out
@@ -283,7 +289,7 @@ class BCOFamily(Method):
                 best_state = {k: v.detach().clone() for k, v in self.idm.state_dict().items()}
             else:
                 stale += 1
-            if stale >= self.options.idm_patience:
+            if stale >= _resolved(self.options.idm_patience):
                 break
         if best_state is not None:
             self.idm.load_state_dict(best_state)
@@ -304,7 +310,7 @@ class BCOFamily(Method):
             s[~is_pre], s1[~is_pre] = self.pos_obs[rows], self.pos_obs[rows + 1]
             return s, s1
 
-        return fit(self.idm, self.idm_opt, pairs, labels, 1, self.config.batch_size,
+        return fit(self.idm, self.idm_opt, pairs, labels, 1, _resolved(self.config.batch_size),
                     self.rng, "IDM", self.config.quiet, self.device, self.augment)  # fmt: skip
 
     # -- post-demonstrations and the next I_s --------------------------------------------------
@@ -313,6 +319,9 @@ class BCOFamily(Method):
         """Append the runs to ``I_pos`` and re-sample ``I_s`` for the next iteration."""
         if not self.iterative or self.idm_data is None or rollouts.observations is None:
             return {}
+        # recorded runs: their actions, obs_t and run_ids come with the observations
+        assert (rollouts.actions is not None and rollouts.obs_t is not None
+                and rollouts.run_ids is not None)  # fmt: skip
         if iteration + 1 < self.num_iterations:  # the last iteration's runs train nothing
             self.count("post_demonstration", int(rollouts.lengths.sum()))
         keep_all = self.idm_data in ("pos", "pre+pos", "whole")

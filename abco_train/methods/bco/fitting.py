@@ -9,6 +9,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from abco_train.harness.runtime import derived_rng
+
 __all__ = ["fit", "predict", "transpose_batch", "validation_split", "TRANSPOSED_ACTIONS",
            "VALIDATION_CAP"]  # fmt: skip
 
@@ -18,6 +20,8 @@ TRANSPOSED_ACTIONS = torch.tensor([3, 2, 1, 0])
 
 #: Held out of ``I_pre`` by default: 10% of it, at most this many transitions.
 VALIDATION_CAP = 2_000
+#: The held-out split's own stream (:func:`abco_train.harness.runtime.derived_rng`).
+VALIDATION_TAG = 0x1D
 
 
 def transpose_batch(frames: list[torch.Tensor], labels: torch.Tensor, rng: np.random.Generator
@@ -114,5 +118,5 @@ def validation_split(n: int, size: int | None, seed: int) -> tuple[np.ndarray, n
         (90, 10, 0)
     """
     size = min(n - 1, size if size is not None else min(VALIDATION_CAP, max(1, n // 10)))
-    order = np.random.default_rng([seed, 0x1D]).permutation(n)
+    order = derived_rng(seed, VALIDATION_TAG).permutation(n)
     return np.sort(order[size:]), np.sort(order[:size])

@@ -130,13 +130,13 @@ def _require_sb3() -> None:
 # -- the discriminator -------------------------------------------------------------------------
 
 
-def build_discriminator(data: TrainingData, arch: str, attention: bool = False,
+def build_discriminator(data: TrainingData, arch: str | None, attention: bool = False,
                         hidden: int = 64) -> IDMNet:  # fmt: skip
     """``D``'s network: one logit for a batch of pairs ``(s, s')`` (``net(s, s1) -> (B, 1)``).
 
     abco's IDM in its ``difference`` form with one output: vectors standardised by the mean
     and std of the expert's ``s`` and ``s' - s``; frames (uint8) through ``arch`` on the
-    frame and the frame difference.
+    frame and the frame difference (``arch`` ``None``: ``mlp`` or ``cnn`` from the space).
     """
     stats: dict[str, Any] = {}
     if len(data.observation_space.shape) == 1:
@@ -188,11 +188,6 @@ class GAIfO(Method):
         """
         _require_sb3()
         return {"attention": False}
-
-    @classmethod
-    def resolve_options(cls, config: RunConfig) -> GAIfOOptions:
-        """The run's :class:`~abco_train.methods.gaifo.options.GAIfOOptions`."""
-        return GAIfOOptions.for_run(config, config.method)
 
     Options = GAIfOOptions
     options: GAIfOOptions

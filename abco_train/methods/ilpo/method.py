@@ -141,16 +141,6 @@ class ILPO(Method):
     Options = ILPOOptions
     options: ILPOOptions
 
-    @classmethod
-    def resolve_options(cls, config: RunConfig) -> ILPOOptions:
-        """ILPO's options for a run (:meth:`ILPOOptions.for_run`): its env kind's defaults,
-        its env's, then the user's.
-
-        Raises:
-            ConfigError: An unknown option or a value out of range.
-        """
-        return ILPOOptions.for_run(config, config.method)
-
     def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
         super().__init__(config, data, rng)
         opts = self.options
@@ -191,25 +181,34 @@ class ILPO(Method):
                 latent = forward_model.latent
                 latent.copy_(latent[:1] + float(opts.split_noise) * torch.randn(latent.shape))
         self.net = ILPONet(forward_model, policy).to(self.device)
-        self.opt = torch.optim.Adam(self.net.parameters(), lr=config.lr)
+        lr = config.lr
+        assert lr is not None, "the run's config is resolved before its method is built"
+        self.opt = torch.optim.Adam(self.net.parameters(), lr=lr)
         #: ``P(a | s, z)`` and the remapping steps so far: (s, z*, a) of the steps some latent
         #: explains.
         self.remapping = ActionRemapping(self.net, self.n_actions, opts, shape,
-                                         self.expert_obs.dtype, self.device, config.lr)  # fmt: skip
+                                         self.expert_obs.dtype, self.device, lr)  # fmt: skip
         self.labels: np.ndarray | None = None
+
+    @property
+    def _batch_size(self) -> int:
+        """The run's minibatch size (``None`` only in a config not yet resolved)."""
+        batch_size = self.config.batch_size
+        assert batch_size is not None, "the run's config is resolved before its method is built"
+        return batch_size
 
     # -- targets ------------------------------------------------------------------------------
 
     def _pooled_delta(self, s: torch.Tensor, s1: torch.Tensor, chunk: int = 1024) -> torch.Tensor:
         """``avgpool(s' - s)`` of frames, flattened (``(B, C * H/p * W/p)``, CPU float32),
         or with ``target="cells"`` the sum of ``|s' - s|`` over each maze cell (``(B, n n)``)."""
-        out = []
+        out, cells = [], self.cells
         for start in range(0, len(s), chunk):
             a = s[start : start + chunk].float().div_(255.0)
             b = s1[start : start + chunk].float().div_(255.0)
             d = (b - a).permute(0, 3, 1, 2)
-            if self.cells is not None:  # how much each cell changed, whatever its colours
-                d = self.cells(d.abs().sum(1, keepdim=True))
+            if cells is not None:  # how much each cell changed, whatever its colours
+                d = cells(d.abs().sum(1, keepdim=True))
             elif self.pool > 1:
                 d = F.avg_pool2d(d, self.pool)
             out.append(d.flatten(1))
@@ -233,7 +232,7 @@ class ILPO(Method):
         w, relax = float(self.options.exp_weight), float(self.options.relax)
         self.net.train()
         recent: list[tuple[float, float]] = []
-        for idx in minibatches(self.rng, len(self.expert_t), steps, self.config.batch_size):
+        for idx in minibatches(self.rng, len(self.expert_t), steps, self._batch_size):
             obs = self.expert_obs[self.expert_t[idx]].to(self.device)
             target = self.expert_targets[idx].to(self.device)
             _, pred, logits = self.net(obs)
@@ -252,7 +251,7 @@ class ILPO(Method):
         ``policy_steps``). One Adam optimiser: parameters without a gradient are skipped."""
         relax = float(self.options.relax)
         model, policy = self.net.forward_model, self.net.policy
-        n, batch_size = len(self.expert_t), self.config.batch_size
+        n, batch_size = len(self.expert_t), self._batch_size
         self.net.train()
         recent_min: list[float] = []
         for idx in minibatches(self.rng, n, steps, batch_size):
@@ -319,7 +318,7 @@ class ILPO(Method):
         epsilon = 1.0 if self.remapping.phases == 0 else float(opts.remap_epsilon)
         if int(opts.remap_steps) > 0:
             stats.update(self._collect(epsilon))
-        stats.update(self.remapping.fit(int(opts.remap_epochs), self.config.batch_size, self.rng))
+        stats.update(self.remapping.fit(int(opts.remap_epochs), self._batch_size, self.rng))
         stats["remap_transitions"] = int(len(self.remapping.z))
         stats.update(self._expert_statistics())
         return stats

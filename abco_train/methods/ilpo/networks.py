@@ -203,11 +203,13 @@ def latent_policy(observation_shape: tuple[int, ...], latents: int, hidden: int,
     """``pi(z | s)`` as logits: an MLP for vectors, the compact CNN (no attention) for frames."""
     if len(observation_shape) == 1:
         d = observation_shape[0]
+        assert mean is not None and std is not None, "vector states: give their mean and std"
         return nn.Sequential(
             Standardise(mean, std), nn.Linear(d, hidden), nn.LeakyReLU(0.2),
             nn.Linear(hidden, hidden), nn.LeakyReLU(0.2), nn.Linear(hidden, latents),
         )  # fmt: skip
-    cnn = CompactCNN(observation_shape, attention=False)  # type: ignore[arg-type]
+    h, w, c = observation_shape
+    cnn = CompactCNN((h, w, c), attention=False)
     return nn.Sequential(cnn, nn.Linear(cnn.out_features, hidden), nn.LeakyReLU(0.2),
                          nn.Linear(hidden, latents))  # fmt: skip
 
