@@ -109,3 +109,19 @@ def test_a_folder_from_before_the_options_moved_is_still_recognised(tmp_path: Pa
     assert finished_result(tmp_path, asdict(changed)) is None
     ilpo = {**old, "method": "ilpo"}  # the BCO settings were filled in for every method
     assert "idm_epochs" not in config_from_record(ilpo).method_options
+
+
+def test_every_count_of_every_method_has_an_upper_bound() -> None:
+    import typing
+    from dataclasses import fields as dc_fields
+
+    from abco_train.config.fields import base_type
+
+    for cls in set(builtin_options().values()):
+        hints = typing.get_type_hints(cls)
+        for f in dc_fields(cls):
+            if base_type(hints[f.name]) is int:
+                assert f.metadata.get("max") is not None, f"{cls.__name__}.{f.name}"
+    with pytest.raises(ConfigError, match="--gaifo-rl-steps must be <= 100,000,000, got"):
+        resolve_config(RunConfig(env="CartPole-v1", method="gaifo",
+                                 method_options={"rl_steps": 10**12}))  # fmt: skip

@@ -22,6 +22,7 @@ from typing import Any
 
 import abco_envs
 from abco_train.config.fields import ConfigError, MethodOptions, option
+from abco_train.config.limits import MAX_EPOCHS, MAX_PRE_TRANSITIONS, MAX_STEPS
 from abco_train.config.run import CELL_ARCHS, IDM_INPUTS, RunConfig, env_kind
 
 __all__ = ["BCOOptions", "VARIANTS", "AUGMENTS", "DEFAULTS", "PRESET_DEFAULTS", "ENV_DEFAULTS",
@@ -56,21 +57,28 @@ class BCOOptions(MethodOptions):
     idm_input: str | None = option("how the IDM reads (s, s'): difference (one encoder over s "
                                    "and s' - s) or pair (each frame encoded apart; images "
                                    "only)", choices=IDM_INPUTS)  # fmt: skip
-    idm_epochs: int | None = option("at most this many IDM epochs over I_s per iteration", min=1)
+    idm_epochs: int | None = option("at most this many IDM epochs over I_s per iteration",
+                                    min=1, max=MAX_EPOCHS)
     idm_patience: int | None = option("stop the IDM's epochs after this many without a better "
-                                      "validation accuracy (the best weights are kept)", min=1)
+                                      "validation accuracy (the best weights are kept)",
+                                      min=1, max=MAX_EPOCHS)
     idm_validation: int | None = option("pre-demonstration transitions held out to measure "
-                                        "the IDM (default: 10%, at most 2,000)", min=1)
-    idm_samples: int | None = option("cap on N = |I_s| (default: |I_pre|)", min=1)
-    policy_epochs: int | None = option("policy epochs over the expert data per iteration", min=1)
+                                        "the IDM (default: 10%, at most 2,000)",
+                                        min=1, max=MAX_PRE_TRANSITIONS)
+    idm_samples: int | None = option("cap on N = |I_s| (default: |I_pre|)",
+                                     min=1, max=MAX_PRE_TRANSITIONS)
+    policy_epochs: int | None = option("policy epochs over the expert data per iteration",
+                                       min=1, max=MAX_EPOCHS)
     first_epochs_factor: int | None = option("iteration 0 trains both nets this many times "
-                                             "longer", min=1)  # fmt: skip
+                                             "longer", min=1, max=MAX_EPOCHS)  # fmt: skip
     min_updates: int | None = option("raise --policy-epochs and --idm-epochs on small data "
                                      "until each makes at least this many minibatch updates "
-                                     "(default: 1000 for the general preset, else none)", min=1)
+                                     "(default: 1000 for the general preset, else none)",
+                                     min=1, max=MAX_STEPS)
     max_updates: int | None = option("cut each policy unit (--policy-epochs) on large data to "
                                      "at most this many minibatch updates (default: 1000 for "
-                                     "the general preset, else none)", min=1)  # fmt: skip
+                                     "the general preset, else none)",
+                                     min=1, max=MAX_STEPS)  # fmt: skip
     augment: str | None = option("training-time augmentation: none, or transpose (mazes: "
                                  "transpose half of each minibatch about the main diagonal, "
                                  "actions N<->W, S<->E) (default: transpose for the general "

@@ -26,6 +26,7 @@ from typing import Any, ClassVar
 
 import abco_envs
 from abco_train.config.fields import ConfigError, MethodOptions, flag_of, option
+from abco_train.config.limits import MAX_ENVS, MAX_EPOCHS, MAX_STEPS, MAX_WIDTH
 from abco_train.config.run import RunConfig, env_kind
 
 __all__ = ["GAIfOOptions", "REWARDS", "COMMON_OPTIONS", "GAIFO_DEFAULTS"]
@@ -42,11 +43,13 @@ class GAIfOOptions(MethodOptions):
 
     flag_prefix: ClassVar[str] = "gaifo-"
 
-    rl_steps: int = option("PPO env steps per run (the budget), split into rounds", min=1)
-    n_envs: int = option("parallel envs of PPO's rollouts", min=1)
-    n_steps: int = option("steps per env per rollout: a round is n_steps * n_envs", min=1)
-    batch_size: int = option("PPO minibatch", min=1)
-    n_epochs: int = option("PPO epochs per rollout", min=1)
+    rl_steps: int = option("PPO env steps per run (the budget), split into rounds",
+                           min=1, max=MAX_STEPS)
+    n_envs: int = option("parallel envs of PPO's rollouts", min=1, max=MAX_ENVS)
+    n_steps: int = option("steps per env per rollout: a round is n_steps * n_envs",
+                          min=1, max=MAX_STEPS)
+    batch_size: int = option("PPO minibatch", min=1, max=MAX_STEPS)
+    n_epochs: int = option("PPO epochs per rollout", min=1, max=MAX_EPOCHS)
     learning_rate: float = option("PPO's learning rate (Adam)", min=0.0, exclusive=True)
     gamma: float = option("PPO's discount factor", min=0.0, max=1.0)
     gae_lambda: float = option("PPO's GAE lambda", min=0.0, max=1.0)
@@ -56,16 +59,17 @@ class GAIfOOptions(MethodOptions):
     max_grad_norm: float = option("PPO's gradient-norm clip", min=0.0, exclusive=True)
     net_arch: list[int] = option("widths of PPO's policy and value MLPs (after the CNN for "
                                  "frames), e.g. [64, 64]")  # fmt: skip
-    features_dim: int = option("frames: width of the policy CNN's output", min=1)
+    features_dim: int = option("frames: width of the policy CNN's output", min=1, max=MAX_WIDTH)
     reward: str = option("the learner's reward from the discriminator's logit l: logit (l), "
                          "gail (-log(1 - D)) or log_d (log D)", choices=REWARDS)  # fmt: skip
     reward_clip: float = option("rewards are clipped to [-reward_clip, reward_clip]", min=0.0,
                                 exclusive=True)  # fmt: skip
     d_lr: float = option("the discriminator's learning rate (Adam)", min=0.0, exclusive=True)
-    d_epochs: int = option("discriminator passes over each round's learner pairs", min=1)
+    d_epochs: int = option("discriminator passes over each round's learner pairs",
+                           min=1, max=MAX_EPOCHS)
     d_batch_size: int = option("learner pairs per discriminator minibatch (plus as many expert "
-                               "pairs)", min=1)  # fmt: skip
-    d_hidden: int = option("vectors: width of the discriminator MLP", min=1)
+                               "pairs)", min=1, max=MAX_STEPS)  # fmt: skip
+    d_hidden: int = option("vectors: width of the discriminator MLP", min=1, max=MAX_WIDTH)
 
     @classmethod
     def for_run(cls, config: RunConfig, method: str = "gaifo") -> GAIfOOptions:

@@ -28,6 +28,7 @@ from typing import Any, ClassVar
 import abco_envs
 from abco_data.registry import ACTION_COUNTS
 from abco_train.config.fields import ConfigError, MethodOptions, flag_of, option
+from abco_train.config.limits import MAX_ENVS, MAX_EPOCHS, MAX_LATENTS, MAX_STEPS, MAX_WIDTH
 from abco_train.config.run import RunConfig, env_kind
 
 __all__ = ["ILPOOptions", "OPTION_DEFAULTS", "ENV_OPTION_DEFAULTS", "TARGETS", "LATENT_INITS",
@@ -51,18 +52,20 @@ class ILPOOptions(MethodOptions):
     flag_prefix: ClassVar[str] = "ilpo-"
 
     latents: int | None = option("k, the number of latent actions (default: the env's number "
-                                 "of actions)", min=2)  # fmt: skip
+                                 "of actions)", min=2, max=MAX_LATENTS)  # fmt: skip
     train_steps: int = option("Adam steps of G and pi on the expert pairs in iteration 0",
-                              min=0)  # fmt: skip
+                              min=0, max=MAX_STEPS)  # fmt: skip
     policy_steps: int | None = option("train G alone for --ilpo-train-steps steps, then pi alone "
                                       "for this many steps against the fixed G; null: train "
                                       "them together (default: 1000 on mazes, null on classic "
-                                      "control)", min=1)  # fmt: skip
-    later_steps: int = option("steps of G and pi in every later iteration", min=0)
+                                      "control)", min=1, max=MAX_STEPS)  # fmt: skip
+    later_steps: int = option("steps of G and pi in every later iteration", min=0, max=MAX_STEPS)
     hidden: int = option("hidden units of the latent policy and the vector forward model",
-                         min=1)  # fmt: skip
-    channels: int = option("channels of the convolutional forward model (frames)", min=1)
-    pool: int = option("frames: average-pool the difference image by this factor", min=1)
+                         min=1, max=MAX_WIDTH)  # fmt: skip
+    channels: int = option("channels of the convolutional forward model (frames)",
+                           min=1, max=MAX_WIDTH)
+    pool: int = option("frames: average-pool the difference image by this factor",
+                       min=1, max=MAX_WIDTH)
     target: str = option("what G predicts on frames: pooled (the pooled difference image) or "
                          "cells (how much each maze cell changed; mazes only)",
                          choices=TARGETS)  # fmt: skip
@@ -79,17 +82,18 @@ class ILPOOptions(MethodOptions):
     remap_input: str = option("what the remapping classifier reads besides onehot(z): "
                               "effect (what z does in s), embedding (E(s)) or both",
                               choices=REMAP_INPUTS)  # fmt: skip
-    remap_steps: int = option("environment steps of remapping per iteration (counted)", min=0)
-    remap_envs: int = option("parallel environments of the remapping steps", min=1)
+    remap_steps: int = option("environment steps of remapping per iteration (counted)",
+                              min=0, max=MAX_STEPS)
+    remap_envs: int = option("parallel environments of the remapping steps", min=1, max=MAX_ENVS)
     remap_epsilon: float = option("epsilon of the epsilon-greedy remapping steps after the "
                                   "first iteration's random ones", min=0.0, max=1.0)  # fmt: skip
     remap_margin: float = option("keep a remapping step only if its best latent's error is "
                                  "below this fraction of the second best's", min=0.0,
                                  exclusive=True, max=1.0)  # fmt: skip
     remap_epochs: int = option("epochs of the remapping classifier over the kept steps per "
-                               "iteration", min=0)  # fmt: skip
+                               "iteration", min=0, max=MAX_EPOCHS)  # fmt: skip
     remap_max_steps: int | None = option("mazes: cut remapping episodes after this many steps "
-                                         "(default: 4 n^2)", min=1)  # fmt: skip
+                                         "(default: 4 n^2)", min=1, max=MAX_STEPS)  # fmt: skip
 
     @classmethod
     def for_run(cls, config: RunConfig, method: str = "ilpo") -> ILPOOptions:
