@@ -6,8 +6,10 @@ abco_data`` runs them on their own through :func:`main`. Every action parser set
 
 A dataset problem ends in one line ``error: ...`` on stderr, never a traceback: exit status 2
 for bad input (an unknown id, a bad ``--set``, a file that does not exist or is of another
-kind), 1 for an operation that failed (a corrupt file, a checksum mismatch, no source for a
-dataset, a full disk). Programming errors keep their traceback.
+kind, a count beyond its bound, an output path that is a device, a FIFO, a folder or a
+link), 1 for an operation that failed (a corrupt file, a checksum mismatch, no source for a
+dataset, a full disk). Programming errors keep their traceback. Output cut short by its
+reader (``abco data list | head``) ends quietly, with exit status 141 as ``SIGPIPE`` gives.
 
 Example:
     >>> main(["list"])  # doctest: +ELLIPSIS
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -28,17 +31,21 @@ from typing import Any
 from abco_data.errors import (
     DatasetError,
     DatasetReadError,
+    InvalidParameterError,
+    InvalidTargetError,
     UnknownDatasetError,
     WrongKindError,
 )
 
 __all__ = ["add_subcommands", "main", "build_parser", "run", "EXIT_FAILED", "EXIT_BAD_INPUT",
-           "UsageError"]
+           "EXIT_BROKEN_PIPE", "UsageError"]
 
 #: Exit status of an operation that failed (corrupt data, no source, a full disk).
 EXIT_FAILED = 1
 #: Exit status of bad input (as argparse's own usage errors).
 EXIT_BAD_INPUT = 2
+#: Exit status when the reader of the output went away (as a process killed by ``SIGPIPE``).
+EXIT_BROKEN_PIPE = 141
 #: Default time limit of ``abco data verify`` (it runs in a child process).
 VERIFY_TIMEOUT = 600.0
 
@@ -47,13 +54,25 @@ class UsageError(DatasetError):
     """A command-line argument that cannot be used (exit status 2)."""
 
 
-def _manifest_entry(dataset_id: str) -> Any:
+def _manifest() -> Any:
     try:
         from abco_data.manifest import read_manifest
 
-        return read_manifest().entry(dataset_id)
+        return read_manifest()
     except (DatasetError, ImportError):
         return None
+
+
+def _manifest_entry(dataset_id: str) -> Any:
+    manifest = _manifest()
+    return None if manifest is None else manifest.entry(dataset_id)
+
+
+def _source(manifest: Any, dataset_id: str) -> str:
+    """Where :func:`abco_data.load` gets a dataset: the Hub, when the manifest pins a
+    revision that holds it; else local generation."""
+    published = manifest is not None and manifest.revision and manifest.entry(dataset_id)
+    return "Hub" if published else "generated"
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
@@ -61,14 +80,16 @@ def _cmd_list(args: argparse.Namespace) -> int:
     from abco_data.registry import DATASET_IDS, spec
 
     home = Path(args.cache_dir) if args.cache_dir else data_home()
+    manifest = _manifest()
     width = max(map(len, DATASET_IDS))
-    print(f"{'id':<{width}} {'env':<18} {'kind':<19} {'published':>12}  cached")
+    print(f"{'id':<{width}} {'env':<18} {'kind':<19} {'size':>9}  {'source':<9}  cached")
     for ds_id in DATASET_IDS:
         s = spec(ds_id)
-        entry = _manifest_entry(ds_id)
+        entry = None if manifest is None else manifest.entry(ds_id)
         size = f"{entry.size / 1e6:.1f} MB" if entry is not None else "-"
         cached = "yes" if (home / s.filename).is_file() else "no"
-        print(f"{ds_id:<{width}} {s.env_id:<18} {s.kind:<19} {size:>12}  {cached}")
+        print(f"{ds_id:<{width}} {s.env_id:<18} {s.kind:<19} {size:>9}  "
+              f"{_source(manifest, ds_id):<9}  {cached}")
     return 0
 
 
@@ -87,7 +108,10 @@ def _cmd_info(args: argparse.Namespace) -> int:
         print(f"filename:    {s.filename}\nparameters:  {json.dumps(dict(s.params))}")
         entry = _manifest_entry(s.id)
         if entry is not None:
-            print(f"published:   {entry.size} bytes, sha256 {entry.sha256}")
+            print(f"bytes:       {entry.size} bytes, sha256 {entry.sha256}")
+        where = "the Hub" if _source(_manifest(), s.id) == "Hub" else \
+            "generated locally (not published on the Hub)"
+        print(f"source:      {where}")
     if path.is_file():
         ds = whole = open_dataset(path)
         if args.layouts is not None:
@@ -237,8 +261,18 @@ def run(args: argparse.Namespace) -> int:
     """Run a parsed action; a dataset error prints one line ``error: ...`` and gives exit
     status :data:`EXIT_BAD_INPUT` or :data:`EXIT_FAILED` (see the module docstring)."""
     try:
-        return int(args.func(args))
-    except (UsageError, UnknownDatasetError, WrongKindError, DatasetReadError) as err:
+        status = int(args.func(args))
+        sys.stdout.flush()  # a reader gone away shows here, not at exit
+        return status
+    except BrokenPipeError:
+        # Nothing more can reach the reader: point stdout at devnull, so that Python's own
+        # flush at exit does not report the broken pipe either.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return EXIT_BROKEN_PIPE
+    except (UsageError, UnknownDatasetError, WrongKindError, DatasetReadError,
+            InvalidParameterError, InvalidTargetError) as err:
         print(f"error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except DatasetError as err:

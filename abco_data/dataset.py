@@ -35,6 +35,7 @@ from abco_data.format import (
     REWARDS,
     TERMINATIONS,
     TRUNCATIONS,
+    FileIdentity,
     LazyH5File,
     ObservationReader,
     action_column,
@@ -73,6 +74,11 @@ class Dataset:
         layouts_taken: ``K`` for a view of the first ``K`` layouts
             (:meth:`first_layouts`), whose counts and readers cover those layouts' episodes
             only; ``None`` for the whole file. ``attrs`` are the whole file's either way.
+        file_identity: The file :func:`open_dataset` opened (device, inode, size,
+            modification time); every later read, in any process, checks that ``path``
+            still names it (:class:`~abco_data.errors.DatasetChangedError` if not).
+
+    ``repr`` is one short line (id, path, kind, counts); ``attrs`` holds the rest.
     """
 
     path: Path
@@ -86,12 +92,18 @@ class Dataset:
     action_space: spaces.Discrete
     reference: ReferenceReturns
     layouts_taken: int | None = None
+    file_identity: FileIdentity | None = field(default=None, repr=False)
     # Per instance, never copied (a view of ``dataclasses.replace`` gets its own).
     _index: dict[str, np.ndarray] = field(default_factory=dict, init=False, repr=False)
     _h5: LazyH5File = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "_h5", LazyH5File(self.path))
+        object.__setattr__(self, "_h5", LazyH5File(self.path, self.file_identity))
+
+    def __repr__(self) -> str:
+        taken = "" if self.layouts_taken is None else f", layouts_taken={self.layouts_taken}"
+        return (f"Dataset(id={self.id!r}, path={str(self.path)!r}, kind={self.kind!r},"
+                f" episodes={self.num_episodes}, transitions={self.num_transitions}{taken})")
 
     # -- file access -------------------------------------------------------------------------
 
@@ -386,9 +398,10 @@ def open_dataset(path: str | os.PathLike[str], *, dataset_id: str | None = None,
     path = Path(path)
     with open_h5(path) as f, hdf5_errors(path, "dataset metadata"):
         header = read_header(f, path, dataset_id=dataset_id, kind=kind)
+        identity = FileIdentity.of(f)
     attrs = header.attrs
     return Dataset(
         path=path, id=attrs["dataset_id"], kind=attrs["kind"], env_id=attrs["env_id"],
         num_episodes=attrs["num_episodes"], num_transitions=attrs["num_transitions"],
         attrs=attrs, observation_space=header.observation_space,
-        action_space=header.action_space, reference=header.reference)
+        action_space=header.action_space, reference=header.reference, file_identity=identity)

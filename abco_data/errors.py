@@ -13,6 +13,9 @@ __all__ = [
     "DatasetWriteError",
     "DatasetReadError",
     "DatasetFileNotFoundError",
+    "DatasetChangedError",
+    "InvalidTargetError",
+    "InvalidParameterError",
 ]
 
 
@@ -57,3 +60,30 @@ class DatasetReadError(DatasetError, OSError):
 
 class DatasetFileNotFoundError(DatasetReadError, FileNotFoundError):
     """No file at the path given."""
+
+
+class DatasetChangedError(DatasetError):
+    """The file of an opened dataset was replaced or changed on disk since it was opened.
+
+    Raised when a process (a ``DataLoader`` worker, say) opens the file again and finds
+    another file under its name: its rows would not match the index read before.
+    """
+
+    def __str__(self) -> str:
+        # A DataLoader worker's error comes back with the worker's traceback in its message:
+        # keep the one line that says what happened.
+        text = super().__str__()
+        if "Traceback" in text:
+            last = text.strip().splitlines()[-1]
+            text = last.split(f"{type(self).__name__}: ", 1)[-1]
+        return text
+
+
+class InvalidTargetError(DatasetError, ValueError):
+    """An output path abco will not write to: a device, a FIFO, a socket, a folder or a
+    symbolic link (abco writes regular files and new paths only); it was left untouched."""
+
+
+class InvalidParameterError(DatasetError, ValueError):
+    """A creation parameter or setting beyond its documented bounds, or of the wrong type;
+    refused before any work is done."""

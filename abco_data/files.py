@@ -3,7 +3,10 @@
 Everything abco_data writes (dataset files, cache copies, Minari exports) is first written
 under a hidden temporary name next to its target, then moved onto the target with
 :func:`os.replace`, which is atomic on one file system: a reader sees the old file or the new
-one, never half of one. Temporary names end in :data:`TEMP_SUFFIX` and carry the id of the
+one, never half of one. Only a regular file (or, for a folder, a folder) is ever replaced:
+:func:`check_target` refuses a device, a FIFO, a socket or a symbolic link at the target, and
+a folder where a file is written, before any work and again just before the rename.
+Temporary names end in :data:`TEMP_SUFFIX` and carry the id of the
 process writing them, so the ones a killed process left behind can be told apart from
 anything else in a folder and removed (:func:`remove_stale_temporaries`, run by
 :func:`atomic_target` for its own target and by the cache for its whole folder).
@@ -26,14 +29,18 @@ import logging
 import os
 import re
 import shutil
+import stat
 import time
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["TEMP_SUFFIX", "STALE_AFTER_SECONDS", "atomic_target", "file_digest",
-           "remove_path", "remove_stale_temporaries", "sha256_of", "temporary_name"]
+from abco_data.errors import DatasetReadError, InvalidTargetError
+
+__all__ = ["TEMP_SUFFIX", "STALE_AFTER_SECONDS", "atomic_target", "check_target", "file_digest",
+           "file_kind", "remove_path", "remove_stale_temporaries", "sha256_of",
+           "temporary_name"]
 
 logger = logging.getLogger(__name__)
 
@@ -128,30 +135,82 @@ def remove_stale_temporaries(folder: str | os.PathLike[str], target: str | None 
     return removed
 
 
+def file_kind(mode: int) -> str:
+    """What an ``st_mode`` is, in words ("a regular file", "a FIFO (named pipe)", ...)."""
+    kinds = ((stat.S_ISREG, "a regular file"), (stat.S_ISDIR, "a folder"),
+             (stat.S_ISLNK, "a symbolic link"), (stat.S_ISCHR, "a character device"),
+             (stat.S_ISBLK, "a block device"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+             (stat.S_ISSOCK, "a socket"))
+    return next((name for test, name in kinds if test(mode)), "not a regular file")
+
+
+def check_target(target: str | os.PathLike[str], *, folder: bool = False) -> None:
+    """Refuse an output path abco must not replace; a new path or a regular file passes.
+
+    Never follows a symbolic link: a link at ``target`` is refused (replacing it would cut the
+    link, and writing through it would change a file elsewhere), as are devices, FIFOs and
+    sockets, and a folder unless ``folder`` (the block writes a folder that replaces it).
+
+    Args:
+        target: The output path.
+        folder: The output is a folder: an existing folder may be replaced, a file may not.
+
+    Raises:
+        InvalidTargetError: ``target`` is something else (the message says what).
+
+    Example:
+        >>> check_target("/dev/null")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        abco_data.errors.InvalidTargetError: cannot write /dev/null: it is a character device; ...
+    """
+    try:
+        mode = os.lstat(target).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        return
+    if stat.S_ISDIR(mode) if folder else stat.S_ISREG(mode):
+        return
+    what = file_kind(mode)
+    if stat.S_ISLNK(mode):
+        what += f" (to {os.readlink(target)})"
+    wanted = "a new path or a folder, which it replaces" if folder else \
+        "a new path or a regular file, which it replaces"
+    raise InvalidTargetError(f"cannot write {target}: it is {what}; abco writes only to {wanted}")
+
+
 def _fsync(path: Path) -> None:
     with open(path, "rb") as handle:
         os.fsync(handle.fileno())
 
 
 @contextmanager
-def atomic_target(target: str | os.PathLike[str], tag: str = "writing") -> Iterator[Path]:
+def atomic_target(target: str | os.PathLike[str], tag: str = "writing", *,
+                  folder: bool = False) -> Iterator[Path]:
     """Yield a temporary path next to ``target``; move what was written there onto ``target``.
 
     The block writes a file or a folder at the yielded path. When it exits normally, a file
     is flushed to disk (``fsync``) and moved onto ``target`` with :func:`os.replace`; a folder
     replaces a folder ``target`` (the old one is moved aside first, then removed). When the
-    block raises, the temporary is removed and ``target`` is left as it was.
+    block raises, the temporary is removed and ``target`` is left as it was. ``target`` is
+    checked by :func:`check_target` before the block runs and again before the rename.
 
     Args:
         target: The final path; its folder is created if needed.
         tag: A word in the temporary name saying what it is for.
+        folder: The block writes a folder, which may replace a folder ``target``.
+
+    Raises:
+        InvalidTargetError: ``target`` is not a new path or a regular file (a folder, with
+            ``folder``); it is left untouched.
     """
     target = Path(target)
+    check_target(target, folder=folder)
     target.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(target.parent, target.name)
     tmp = temporary_name(target, tag)
     try:
         yield tmp
+        if tmp.exists():
+            check_target(target, folder=tmp.is_dir())  # nothing else took its place meanwhile
         if tmp.is_dir():
             old = temporary_name(target, "old") if target.exists() else None
             if old is not None:
@@ -167,10 +226,20 @@ def atomic_target(target: str | os.PathLike[str], tag: str = "writing") -> Itera
 
 
 def file_digest(path: str | os.PathLike[str]) -> tuple[int, str]:
-    """Return ``(size in bytes, hex sha256)`` of a file, read in 1 MiB chunks."""
+    """Return ``(size in bytes, hex sha256)`` of a file, read in 1 MiB chunks.
+
+    Raises:
+        DatasetReadError: ``path`` is not a regular file (a FIFO, a device: never read, so
+            never waited on).
+    """
     digest = hashlib.sha256()
     size = 0
-    with open(path, "rb") as handle:
+    # Non-blocking open: opening a FIFO for reading would wait for a writer.
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    with open(fd, "rb") as handle:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise DatasetReadError(f"{path}: cannot read {file_kind(mode)}: not a regular file")
         while chunk := handle.read(_READ_CHUNK):
             digest.update(chunk)
             size += len(chunk)

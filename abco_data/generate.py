@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from abco_data.files import check_target
 from abco_data.format import (
     FORMAT_NAME,
     FORMAT_VERSION,
@@ -32,6 +33,7 @@ from abco_data.format import (
     to_json,
 )
 from abco_data.manifest import data_home
+from abco_data.progress import progress_bar
 from abco_data.reference import ReferenceReturns, classic_reference, maze_reference
 from abco_data.registry import DATASET_SPLITS, DatasetSpec, spec
 
@@ -151,18 +153,22 @@ def generate(dataset_id: str, path: str | os.PathLike[str] | None = None, *,
     Args:
         dataset_id: One of :data:`~abco_data.registry.DATASET_IDS`.
         path: Target file; default ``data_home() / "<name>.hdf5"``. Written atomically.
-        progress: Show a tqdm progress bar on stderr.
+        progress: Show progress on stderr (:func:`abco_data.progress.progress_bar`: a bar on a
+            terminal, a line every tenth of the way in a log).
         **overrides: Creation parameters to change (e.g. ``layouts=2``), recorded in the file.
 
     Raises:
         UnknownDatasetError: Unknown id.
         TypeError: An override the dataset has no parameter for.
+        InvalidParameterError: An override of the wrong type or beyond its bound
+            (:mod:`abco_data.bounds`; also a ``ValueError``), refused before any work.
         ValueError: Overrides without an explicit ``path`` (the cache holds standard files),
             or a ``split`` no dataset may be made from.
+        InvalidTargetError: ``path`` is a device, a FIFO, a folder or a symbolic link
+            (refused before any work; left untouched).
         DatasetWriteError: Writing failed (e.g. a full disk); ``path`` was left untouched.
     """
     import gymnasium as gym
-    from tqdm.auto import tqdm
 
     import abco_envs  # noqa: F401  (registers the mazes)
     from abco_envs.maze.env import maze_cells
@@ -174,6 +180,7 @@ def generate(dataset_id: str, path: str | os.PathLike[str] | None = None, *,
                              " only holds the standard datasets")
         path = data_home() / s.filename
     path = Path(path)
+    check_target(path)
     # The split is not an env_kwargs entry of the file: evaluation envs pick their own split.
     split: dict[str, Any] = {"split": layout_split(s.params)} if s.is_maze else {}
     ref = reference_for(s)
@@ -181,8 +188,8 @@ def generate(dataset_id: str, path: str | os.PathLike[str] | None = None, *,
     actions_name = action_column(s.kind)
     seeds, layout_index, lengths, returns, layouts = [], [], [], [], []
     total, unit = _progress_total(s)
-    with DatasetWriter(path) as w, tqdm(total=total, unit=unit, disable=not progress,
-                                       desc=s.id, leave=False) as bar:
+    with DatasetWriter(path) as w, progress_bar(total=total, unit=unit, disable=not progress,
+                                               desc=s.id, leave=False) as bar:
         for ep_seed, k, cols in _episodes(s, env):
             w.append(OBSERVATIONS, cols["observations"])
             w.append(actions_name, np.asarray(cols["actions"], dtype=np.int64))

@@ -16,9 +16,17 @@
 3. local generation with :func:`abco_data.generate`, whose bytes equal the published ones, so the
    same manifest entry checks them.
 
+Every call to the Hub has a total time limit, ``$ABCO_HUB_TIMEOUT`` seconds (default 60),
+connection, answers and huggingface_hub's retries included, and may not receive more bytes
+than the manifest's size of the file (:mod:`abco_data.hub_calls`): a Hub that never answers,
+drips its answer or announces a file far larger than the manifest's counts as any other Hub
+failure, and :func:`load` generates the dataset instead. huggingface_hub's retry warnings are
+held back; the failure is reported once, in one line.
+
 Temporary files that killed runs left in the cache are removed on the next call. A cache
 folder that cannot be written ends in a :class:`~abco_data.errors.DatasetWriteError` naming
-it.
+it; a cache file that is not a regular file (a FIFO, a device, a folder, a symbolic link) is
+never replaced: :class:`~abco_data.errors.InvalidTargetError`.
 
 Offline (``offline=True``, or huggingface_hub's offline mode: ``HF_HUB_OFFLINE=1``) no request
 is sent: a copy already in the huggingface_hub cache is still used, and otherwise the dataset is
@@ -56,8 +64,15 @@ from abco_data.errors import (
     DatasetWriteError,
     WrongKindError,
 )
-from abco_data.files import atomic_target, file_digest, remove_path, remove_stale_temporaries
+from abco_data.files import (
+    atomic_target,
+    check_target,
+    file_digest,
+    remove_path,
+    remove_stale_temporaries,
+)
 from abco_data.generate import generate
+from abco_data.hub_calls import HubCallStopped, call_hub, hub_timeout
 from abco_data.manifest import (
     CACHE_ENV,
     DEFAULT_REPO_ID,
@@ -71,6 +86,7 @@ from abco_data.manifest import (
     read_manifest,
     verify_file,
 )
+from abco_data.progress import log_progress_class
 from abco_data.registry import check_layout_count, spec
 
 __all__ = [
@@ -126,22 +142,26 @@ def _hub_file(
         raise DatasetNotAvailableError(
             f"{dataset_id} is not published: the manifest {manifest.path} pins no Hub revision"
         )
+    limit = hub_timeout()  # a bad $ABCO_HUB_TIMEOUT is reported, not taken for a Hub failure
+    # Endpoint and cache are huggingface_hub's own; silent_tqdm is the do-nothing bar it
+    # passes itself where it wants no progress shown (its annotation of tqdm_class asks for a
+    # tqdm subclass, which silent_tqdm is not: hence the ignore).
+    bar = log_progress_class() if progress else silent_tqdm
     try:
-        # Endpoint and cache are huggingface_hub's own; silent_tqdm is the do-nothing bar it
-        # passes itself where it wants no progress shown (its annotation of tqdm_class asks
-        # for a tqdm subclass, which silent_tqdm is not: hence the two ignores).
-        local = hf_hub_download(  # pyright: ignore[reportCallIssue]
+        local = call_hub(lambda: hf_hub_download(  # pyright: ignore[reportCallIssue]
             repo_id=manifest.repo_id,
             filename=entry.filename,
             repo_type="dataset",
             revision=rev,
             local_files_only=local_files_only,
             force_download=force_download,
-            tqdm_class=None if progress else silent_tqdm,  # pyright: ignore[reportArgumentType]
-        )
-    except HUB_ERRORS as err:
+            tqdm_class=bar,  # pyright: ignore[reportArgumentType]
+        ), timeout=limit, max_bytes=entry.size)
+    except (*HUB_ERRORS, ValueError) as err:  # ValueError: huggingface_hub's "too large"
         if local_files_only:
             reason = "offline and not in the huggingface_hub cache"
+        elif isinstance(err, HubCallStopped):
+            reason = str(err)
         else:
             reason = f"{type(err).__name__}: {str(err).strip().splitlines()[0] if str(err) else ''}"
         raise DatasetNotAvailableError(
@@ -273,6 +293,9 @@ def fetch(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
         ChecksumError: The locally generated file differs from the manifest entry.
         DatasetNotAvailableError: No source could provide the dataset.
         DatasetWriteError: The cache cannot be written (full, read-only, not a folder).
+        InvalidTargetError: The cache holds something else than a regular file under the
+            dataset's name (a FIFO, a device, a folder, a symbolic link).
+        InvalidParameterError: ``$ABCO_HUB_TIMEOUT`` is not a number of seconds in range.
     """
     man = as_manifest(manifest)
     target = cached_path(dataset_id, cache_dir, manifest=man)
@@ -284,6 +307,7 @@ def fetch(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
         return _generate_into(dataset_id, None, target, progress=progress)
     if _cached_copy(target, entry, dataset_id) is not None:
         return target
+    check_target(target)  # a FIFO, device, folder or link in the cache: refused, never replaced
 
     try:
         return _download_into(dataset_id, entry, man, target, revision=revision,
@@ -322,6 +346,9 @@ def load(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
         ValueError: ``layouts`` is not an integer from 1 to the dataset's layouts (checked
             against the registry before anything is fetched, then against the file).
         WrongKindError: ``layouts`` for a dataset without maze layouts.
+        InvalidParameterError: ``$ABCO_HUB_TIMEOUT`` is not a number of seconds in range.
+        InvalidTargetError: The cache holds something else than a regular file under the
+            dataset's name (a FIFO, a device, a folder, a symbolic link).
     """
     if layouts is not None:  # a bad count fails now, not after minutes of generation
         wanted = spec(dataset_id)
@@ -358,6 +385,8 @@ def download(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None
         DatasetNotAvailableError: The manifest lists no published file for the id, or the Hub
             cannot be reached or has no copy.
         ChecksumError: The Hub's file differs from the manifest entry (it is not cached).
+        InvalidTargetError: The cache holds something else than a regular file under the
+            dataset's name.
     """
     man = as_manifest(manifest)
     target = cached_path(dataset_id, cache_dir, manifest=man)
@@ -367,5 +396,6 @@ def download(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None
             f"{dataset_id} has no published file: the manifest {man.path} has no entry for it "
             "(generate it locally with abco_data.generate or abco_data.load)"
         )
+    check_target(target)
     return _download_into(dataset_id, entry, man, target, revision=revision, progress=progress,
                           offline=_is_offline(None))

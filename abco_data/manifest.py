@@ -24,7 +24,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from abco_data.errors import ChecksumError, DatasetError, UnknownDatasetError
+from huggingface_hub.utils import HFValidationError, validate_repo_id
+
+from abco_data.errors import (
+    ChecksumError,
+    DatasetError,
+    InvalidParameterError,
+    UnknownDatasetError,
+)
 from abco_data.files import atomic_target, file_digest
 from abco_data.registry import DATASET_IDS, spec
 
@@ -38,6 +45,7 @@ __all__ = [
     "cache_filename",
     "cached_path",
     "check_known_id",
+    "check_repo_id",
     "data_home",
     "default_cache_dir",
     "default_manifest_path",
@@ -95,6 +103,26 @@ class Manifest:
         return self.files.get(dataset_id)
 
 
+def check_repo_id(repo_id: object, what: str = "Hub repo id") -> str:
+    """``repo_id`` if it is a valid ``owner/name`` Hub repo id (huggingface_hub's own rules).
+
+    Raises:
+        InvalidParameterError: Anything else (``../../x``, ``a/b/c``, ``name`` alone...).
+
+    Example:
+        >>> check_repo_id("abco-datasets/abco")
+        'abco-datasets/abco'
+    """
+    try:
+        if not isinstance(repo_id, str) or repo_id.count("/") != 1:
+            raise HFValidationError("it must read 'owner/name'")
+        validate_repo_id(repo_id)
+    except HFValidationError as err:
+        reason = str(err).strip().splitlines()[0] if str(err).strip() else "not valid"
+        raise InvalidParameterError(f"invalid {what} {repo_id!r}: {reason}") from None
+    return repo_id
+
+
 def default_manifest_path() -> Path:
     """``$ABCO_DATA_MANIFEST`` if set, else the ``manifest.json`` shipped next to this module."""
     override = os.environ.get(MANIFEST_ENV)
@@ -134,8 +162,10 @@ def read_manifest(path: str | os.PathLike[str] | None = None) -> Manifest:
     if revision is not None and not isinstance(revision, str):
         raise bad(f"'revision' must be a string, got {revision!r}")
     repo_id = raw.get("repo_id", DEFAULT_REPO_ID)
-    if not isinstance(repo_id, str) or repo_id.count("/") != 1:
-        raise bad(f"'repo_id' must read 'owner/name', got {repo_id!r}")
+    try:
+        check_repo_id(repo_id, "'repo_id'")
+    except InvalidParameterError as err:
+        raise bad(str(err)) from None
     files_raw = raw.get("files", {})
     if not isinstance(files_raw, dict):
         raise bad("'files' must be an object mapping dataset ids to entries")

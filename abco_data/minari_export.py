@@ -36,7 +36,7 @@ from minari.namespace import create_namespace, list_local_namespaces
 import abco_envs  # noqa: F401  (registers the maze ids that the datasets' env specs name)
 from abco_data.arrays import DatasetArrays
 from abco_data.dataset import Dataset, open_dataset
-from abco_data.files import atomic_target, remove_path, temporary_name
+from abco_data.files import atomic_target, check_target, remove_path, temporary_name
 from abco_data.format import IDM_EVAL_ACTIONS
 
 __all__ = ["export_to_minari", "NO_ACTIONS"]
@@ -137,6 +137,8 @@ def export_to_minari(dataset: Dataset | str | os.PathLike[str], minari_id: str |
 
     Raises:
         FileExistsError: The Minari dataset exists and ``overwrite`` is False.
+        InvalidTargetError: The dataset's path in the datasets root is not a folder (a file,
+            a symbolic link, a device...); checked before anything is written.
 
     Example:
         >>> import tempfile, os, minari, abco_data
@@ -157,11 +159,12 @@ def export_to_minari(dataset: Dataset | str | os.PathLike[str], minari_id: str |
     target = root / minari_id
     if target.exists() and not overwrite:
         raise FileExistsError(f"Minari dataset {minari_id} already exists at {target}")
+    check_target(target, folder=True)
     build_root = temporary_name(root / "export", "minari")
     try:
         with _minari_root(build_root):
             _create(ds, minari_id)
-        with atomic_target(target, "minari") as tmp:
+        with atomic_target(target, "minari", folder=True) as tmp:
             os.replace(build_root / minari_id, tmp)
         namespace = minari_id.rpartition("/")[0]
         with _minari_root(root):

@@ -17,11 +17,13 @@ from abco_data.errors import DatasetError, DatasetNotAvailableError
 from abco_data.files import file_digest
 from abco_data.format import attr_value, open_h5
 from abco_data.hub import HUB_ERRORS
+from abco_data.hub_calls import call_hub
 from abco_data.manifest import (
     Manifest,
     as_manifest,
     cache_filename,
     cached_path,
+    check_repo_id,
     verify_file,
 )
 
@@ -171,15 +173,20 @@ def push(dataset_id: str, repo_id: str, *, path: str | os.PathLike[str] | None =
         create_repo: Create the repo if it does not exist.
         manifest: A manifest or the path of one; a file listed there must match its entry.
 
+    Every request has the total time limit of ``$ABCO_HUB_TIMEOUT`` (see
+    :mod:`abco_data.hub_calls`); set it higher to upload a large file on a slow line.
+
     Returns:
         The commit id.
 
     Raises:
+        InvalidParameterError: ``repo_id`` is not a valid ``owner/name`` Hub repo id.
         UnknownDatasetError: Unknown id.
         DatasetNotAvailableError: No file at ``path`` (or in the cache).
         ChecksumError: The file differs from the manifest's entry for the id.
         DatasetError: The Hub refused or failed a request (the message says which).
     """
+    check_repo_id(repo_id)
     man = as_manifest(manifest)
     cached = cached_path(dataset_id, manifest=man)
     file_path = Path(path).expanduser() if path is not None else cached
@@ -195,17 +202,18 @@ def push(dataset_id: str, repo_id: str, *, path: str | os.PathLike[str] | None =
     api = HfApi(token=token)  # huggingface_hub's own endpoint (HF_ENDPOINT)
     if create_repo:
         with _hub_errors(f"could not create the dataset repo {repo_id}"):
-            api.create_repo(repo_id, repo_type="dataset", exist_ok=True, token=token)
+            call_hub(lambda: api.create_repo(repo_id, repo_type="dataset", exist_ok=True,
+                                             token=token))
     previous = None
     try:
-        readme = hf_hub_download(
+        readme = call_hub(lambda: hf_hub_download(
             repo_id,
             "README.md",
             repo_type="dataset",
             revision=revision,
             token=token,
             force_download=True,
-        )
+        ))
         previous = Path(readme).read_text(encoding="utf-8")
     except HUB_ERRORS as err:
         logger.info("no dataset card in %s yet (%s): writing a new one", repo_id, err)
@@ -216,7 +224,7 @@ def push(dataset_id: str, repo_id: str, *, path: str | os.PathLike[str] | None =
     ]
     size, sha256 = file_digest(file_path)
     with _hub_errors(f"could not push {dataset_id} to {repo_id}"):
-        info = api.create_commit(
+        info = call_hub(lambda: api.create_commit(
             repo_id,
             operations,
             commit_message=f"Add {dataset_id} ({filename}, sha256 {sha256[:12]})",
@@ -224,7 +232,7 @@ def push(dataset_id: str, repo_id: str, *, path: str | os.PathLike[str] | None =
             repo_type="dataset",
             revision=revision,
             token=token,
-        )
+        ))
     commit = str(info.oid)
     if not _HEX40.fullmatch(commit):
         logger.warning("the Hub returned an unexpected commit id %r", commit)

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 import abco_envs
+from abco_data.bounds import check_params
 from abco_data.errors import UnknownDatasetError
 from abco_envs.maze.procedural import PROCEDURAL_SPLIT_SIZE
 
@@ -129,11 +130,14 @@ class DatasetSpec:
         return self.id.split("/", 1)[1] + ".hdf5"
 
     def with_overrides(self, **overrides: Any) -> DatasetSpec:
-        """A copy whose parameters are updated by ``overrides`` (only known keys).
+        """A copy whose parameters are updated by ``overrides`` (only known keys), each
+        checked against its bounds (:mod:`abco_data.bounds`) before anything is made.
 
         Raises:
             TypeError: An override that this dataset has no parameter for, or one of
                 ``split`` (a dataset's layout split is part of its id).
+            InvalidParameterError: A value of the wrong type or beyond its bound (also a
+                ``ValueError``).
         """
         unknown = sorted(set(overrides) - set(self.params))
         if unknown:
@@ -143,8 +147,9 @@ class DatasetSpec:
         if "split" in overrides:
             raise TypeError(f"{self.id}: parameter split cannot be overridden (the layout split"
                             " of a dataset is part of its id)")
-        return DatasetSpec(self.id, self.env_id, self.kind,
-                           MappingProxyType({**self.params, **overrides}))
+        params = {**self.params, **overrides}
+        check_params(self.id, self.env_id, self.kind, params)
+        return DatasetSpec(self.id, self.env_id, self.kind, MappingProxyType(params))
 
 
 def is_maze(env_id: str) -> bool:

@@ -6,7 +6,11 @@ observations keep their stored dtype (``uint8`` images stay ``uint8``, HWC), act
 Two modes:
 
 - file-backed (default): each process opens its own h5py handle lazily, on its first read, so a
-  ``DataLoader`` with workers gets one handle per worker (h5py handles must not cross a fork);
+  ``DataLoader`` with workers gets one handle per worker (h5py handles must not cross a fork).
+  Each handle is pinned to the file the dataset was opened on: a worker that finds another
+  file under the path (the dataset was replaced on disk since) raises
+  :class:`~abco_data.errors.DatasetChangedError` naming it, instead of pairing the new file's
+  frames with the old file's actions;
 - in memory (``in_memory=True``): the columns are read once, up front; for small datasets.
 
 Example:
@@ -30,7 +34,7 @@ from gymnasium import spaces
 from torch.utils.data import Dataset as TorchDataset
 
 from abco_data.arrays import DatasetArrays
-from abco_data.format import ACTIONS, LazyH5File, ObservationReader
+from abco_data.format import ACTIONS, FileIdentity, LazyH5File, ObservationReader
 from abco_data.validation import check_observations
 
 __all__ = ["TransitionDataset", "TransitionSource"]
@@ -48,6 +52,8 @@ class TransitionSource(Protocol):
     def action_column(self) -> str: ...
     @property
     def observation_space(self) -> spaces.Space[Any]: ...
+    @property
+    def file_identity(self) -> FileIdentity | None: ...
     def transition_index(self) -> tuple[np.ndarray, np.ndarray]: ...
     def actions_of_transitions(self, *, idm_eval: bool = False) -> np.ndarray: ...
     def load_arrays(self) -> DatasetArrays: ...
@@ -82,7 +88,9 @@ class TransitionDataset(TorchDataset):
         self.indices = None if indices is None else np.asarray(indices, dtype=np.int64)
         self.observations = dataset.load_arrays().observations if in_memory else None
         self.observation_space = dataset.observation_space
-        self._h5 = LazyH5File(self.path)  # opened by the process that reads (one per worker)
+        # Opened by the process that reads (one per worker), pinned to the file the index above
+        # came from.
+        self._h5 = LazyH5File(self.path, dataset.file_identity)
 
     def __len__(self) -> int:
         return len(self.obs_t) if self.indices is None else len(self.indices)

@@ -1,4 +1,5 @@
-"""The ``abco`` command: ``train``, ``bench``, ``report``, ``play`` and ``data``.
+"""The ``abco`` command: ``train``, ``bench``, ``report``, ``play``, ``convert-checkpoint``
+and ``data``.
 
 Every field of :class:`abco_train.config.run.RunConfig` is an option of ``abco train`` and an
 override of ``abco bench`` (``--batch-size 32``, ``--no-attention``, ...), generated from the
@@ -9,8 +10,10 @@ ones take the defaults of the env, preset and method.
 
 This module owns the exit codes: 0 success; 2 bad input (an option, a file, a dataset, a
 plugin), printed as one ``error: ...`` line; 1 a failed operation (a grid with failed cells,
-a disk error). Programming errors keep their traceback. Parsing the command line and
-``--help`` import neither torch nor the trainer.
+a disk error: an ``OSError`` with an errno, a full disk or a read-only folder, printed as one
+line naming the file); 130 interrupted; 141 stdout closed early (``abco ... | head``: quiet).
+Programming errors keep their traceback. Parsing the command line and ``--help`` import
+neither torch nor the trainer.
 
 Example:
     >>> argv = ["train", "--env", "CartPole-v1", "--idm-epochs", "3"]
@@ -23,13 +26,20 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
+import os
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from abco_data.cli import EXIT_BROKEN_PIPE
 from abco_data.cli import add_subcommands as add_data_subcommands
+from abco_data.cli import run as run_data  # its own exit codes for dataset errors
 from abco_data.errors import DatasetError
 from abco_train import __version__
+from abco_train.cli_play import add_play_options, play
+from abco_train.config.fields import check_fields, count
+from abco_train.config.limits import MAX_JOBS
 from abco_train.config.run import ConfigError, add_config_options, config_from_args
 
 __all__ = ["build_parser", "main"]
@@ -121,6 +131,8 @@ def _bench(args: argparse.Namespace) -> int:
 
     overrides = {f.name: getattr(args, f.name) for f in fields(RunConfig)
                  if f.name not in CELL_FIELDS and getattr(args, f.name, None) is not None}
+    threads = {} if args.threads is None else {"threads": args.threads}
+    check_fields(RunConfig(**overrides, **threads))  # types and bounds, before the grid's plan
     layouts = [None] if args.layouts is None else parse_layouts(args.layouts)
     cells = plan(parse_list(args.envs), parse_list(args.methods), parse_seeds(args.seeds),
                  layouts)  # fmt: skip
@@ -129,7 +141,12 @@ def _bench(args: argparse.Namespace) -> int:
         plugins=args.plugin, backend=args.backend, jobs=args.jobs, threads=args.threads,
         address=args.address, quiet=args.quiet,
     )  # fmt: skip
-    return 1 if summary["failed"] else 0
+    if summary["failed"]:  # the cells' own lines are above; the one error line says so
+        from abco_train.bench.grid import failed_text
+
+        print(f"error: {failed_text(summary)}", file=sys.stderr)
+        return 1
+    return 0
 
 
 def _bench_options(parser: argparse.ArgumentParser) -> None:
@@ -144,8 +161,8 @@ def _bench_options(parser: argparse.ArgumentParser) -> None:
                         "OUT/{env}/{method}/layouts{K}/seed{seed} (e.g. 100,1000,10000; "
                         "default: the standard datasets)")  # fmt: skip
     parser.add_argument("--out", required=True, help="the grid's folder (RUNS_DIR)")
-    parser.add_argument("--jobs", type=_positive, default=None,
-                        help="cells at once (default: cores)")  # fmt: skip
+    parser.add_argument("--jobs", type=count(MAX_JOBS), default=None,
+                        help=f"cells at once, at most {MAX_JOBS} (default: cores)")  # fmt: skip
     parser.add_argument("--backend", choices=BACKENDS, default="local")
     parser.add_argument("--address", default=None, help="Ray cluster address (ray backend)")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
@@ -202,13 +219,6 @@ def _builtin_names() -> set[str]:
     return set(builtin_options())
 
 
-def _positive(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
-
-
 # -- abco report -----------------------------------------------------------------------------
 
 
@@ -230,34 +240,23 @@ def _report_options(parser: argparse.ArgumentParser) -> None:
                         " abco); must be a method of the grid")  # fmt: skip
 
 
-# -- abco play -------------------------------------------------------------------------------
+# -- abco convert-checkpoint -----------------------------------------------------------------
+
+#: The help of ``abco convert-checkpoint``: unpickling can run code.
+CONVERT_HELP = ("rewrite a run folder's checkpoint from the old pickled format into the data-only "
+                "one; only for run folders you trust: the old format can run code")  # fmt: skip
 
 
-def _play(args: argparse.Namespace) -> int:
-    from abco_train.bench.grid import parse_seeds
-    from abco_train.harness.trained_policy import load_policy, record_gif
+def _convert_checkpoint(args: argparse.Namespace) -> int:
+    from abco_train.harness.checkpoint import convert_legacy_checkpoint
 
-    episodes = parse_seeds(args.episodes)
-    policy = load_policy(args.run_dir, quiet=args.quiet)
-    out = args.out or str(args.run_dir).rstrip("/") + f"/play_{args.split}.gif"
-    path = record_gif(policy, out, episodes, split=args.split, max_steps=args.max_steps,
-                      fps=args.fps, progress=not args.quiet)  # fmt: skip
-    print(f"animation: {path}")
+    path = convert_legacy_checkpoint(args.run_dir)
+    print(f"checkpoint: {path} (data only)")
     return 0
 
 
-def _play_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("run_dir", help="a run folder written by abco train")
-    parser.add_argument("--episodes", default="0-3",
-                        help="mazes: layout indices of the split; classic control: reset seeds"
-                        " (e.g. 0-3 or 0,5; default 0-3)")  # fmt: skip
-    parser.add_argument("--split", choices=("train", "test"), default="train",
-                        help="maze split (default train)")  # fmt: skip
-    parser.add_argument("--out", default=None, help="GIF to write (default RUN_DIR/play_SPLIT.gif)")
-    parser.add_argument("--max-steps", type=_positive, default=200,
-                        help="cap on each episode's length (default 200)")  # fmt: skip
-    parser.add_argument("--fps", type=_positive, default=8, help="frames per second (default 8)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+def _convert_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run_dir", help="a run folder written by an older abco (one you trust)")
 
 
 # -- the parser and the entry point ------------------------------------------------------------
@@ -269,12 +268,14 @@ def _subcommand(sub: Any, name: str, help: str, options: Callable[[Any], None],
     options(parser)
     if plugins:
         parser.add_argument("--plugin", action="append", default=[], metavar="MODULE_OR_FILE",
-                            help="import a module or .py file first (it may register methods)")
+                            help="import a module or .py file that registers methods, first "
+                            "(it runs as code: only plugins you trust)")  # fmt: skip
     parser.set_defaults(func=func)
 
 
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
-    """The parser of ``abco``: ``train``, ``bench``, ``report``, ``play`` and ``data``.
+    """The parser of ``abco``: ``train``, ``bench``, ``report``, ``play``,
+    ``convert-checkpoint`` and ``data``.
 
     Args:
         argv: The command line to be parsed: its ``--method`` decides which method's options
@@ -290,25 +291,74 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
                 _bench)  # fmt: skip
     _subcommand(sub, "report", "tables and plots of an abco bench grid", _report_options,
                 _report, plugins=False)  # fmt: skip
-    _subcommand(sub, "play", "roll a trained policy out and write an animated GIF", _play_options,
-                _play)  # fmt: skip
+    _subcommand(sub, "play", "roll a trained policy out and write an animated GIF",
+                add_play_options, play)  # fmt: skip
+    _subcommand(sub, "convert-checkpoint", CONVERT_HELP, _convert_options, _convert_checkpoint,
+                plugins=False)  # fmt: skip
     add_data_subcommands(sub)
     return parser
+
+
+def _failure(err: Exception) -> tuple[int, str] | None:
+    """The exit code and the message of an error that ends a command in one line: bad input
+    (2) or a failed operation (1: a disk error, ``OSError`` with an errno); ``None`` for any
+    other error, a programming error whose traceback is kept."""
+    from abco_data.errors import DatasetWriteError
+
+    if isinstance(err, DatasetWriteError):  # bad luck with the disk, not bad input
+        return 1, str(err)
+    if isinstance(err, _user_errors()):
+        return 2, str(err)
+    if isinstance(err, OSError) and err.errno is not None:
+        files = " -> ".join(str(f) for f in (err.filename, err.filename2) if f is not None)
+        reason = err.strerror or os.strerror(err.errno)
+        hint = ("; free some space and run the same command again"
+                if err.errno in (errno.ENOSPC, errno.EDQUOT) else "")  # fmt: skip
+        return 1, f"{reason}: {files}{hint}" if files else f"{reason}{hint}"
+    return None
+
+
+def _stdout_closed() -> bool:
+    """Whether stdout's reader went away (``abco ... | head``): its pipe no longer takes what
+    is left to write, or polls as an error (a pipe without a reader; the write that failed
+    may have emptied the buffer)."""
+    import select
+
+    try:
+        sys.stdout.flush()
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & select.POLLERR for _, events in poller.poll(0))
+    except BrokenPipeError:
+        return True
+    except (AttributeError, OSError, ValueError):  # no poll (Windows), no file behind stdout
+        return False
+
+
+def _run(args: argparse.Namespace) -> int:
+    try:
+        return int(run_data(args) if args.command == "data" else args.func(args))
+    except KeyboardInterrupt:
+        print("interrupted; re-run the same command to resume", file=sys.stderr)
+        return 130
+    except Exception as err:
+        failure = _failure(err)
+        if failure is None or (isinstance(err, BrokenPipeError) and _stdout_closed()):
+            raise
+        print(f"error: {failure[1]}", file=sys.stderr)
+        return failure[0]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``abco`` console script and ``python -m abco_train``."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    args = build_parser(argv).parse_args(argv)
-    if args.command == "data":
-        from abco_data.cli import run
-
-        return run(args)
     try:
-        return int(args.func(args))
-    except _user_errors() as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("interrupted; re-run the same command to resume", file=sys.stderr)
-        return 130
+        code = _run(build_parser(argv).parse_args(argv))
+        sys.stdout.flush()  # a reader gone shows here, not as a message at exit
+        return code
+    except BrokenPipeError:
+        if not _stdout_closed():
+            raise
+        with contextlib.suppress(OSError, ValueError):  # no more writes to the closed pipe
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE

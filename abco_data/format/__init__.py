@@ -6,7 +6,8 @@ This package is the only place that knows the layout described in ``docs/format.
   column each kind has, the row count of each column, the storage settings, the JSON
   encoding of spaces and the header checks a reader runs before trusting a file;
 - :mod:`abco_data.format.writer`: :class:`DatasetWriter`, the atomic writer;
-- :mod:`abco_data.format.reader`: :func:`open_h5`, :class:`LazyH5File` and
+- :mod:`abco_data.format.handle`: :class:`LazyH5File`, pinned to one file (:class:`FileIdentity`);
+- :mod:`abco_data.format.reader`: :func:`open_h5` and
   :class:`ObservationReader`, which decodes palette-encoded observations
   (:mod:`abco_data.palette`), with HDF5's errors turned into ones naming the file;
 - :mod:`abco_data.format.heaps`: the check that keeps HDF5 from looping forever on a damaged
@@ -22,10 +23,10 @@ Example:
     ('truncations', 'idm_eval_actions')
 """
 
+from abco_data.format.handle import FileIdentity, LazyH5File
 from abco_data.format.heaps import check_global_heaps
 from abco_data.format.reader import (
     HDF5_ERRORS,
-    LazyH5File,
     ObservationReader,
     h5_column,
     hdf5_errors,
@@ -76,7 +77,8 @@ __all__ = [
     "FORMAT_VERSION", "GZIP_LEVEL", "IDM_EVAL_ACTIONS", "IMAGE_CHUNK_ROWS", "IMAGE_GZIP_LEVEL",
     "KINDS", "MAZE_EPISODE_COLUMNS", "OBSERVATIONS", "OBSERVATION_ENCODINGS", "PALETTE",
     "POSITIONS", "REFERENCE_COLUMNS", "REQUIRED_ROOT_ATTRS", "REWARDS", "TERMINATIONS",
-    "TRUNCATIONS", "VECTOR_CHUNK_BYTES", "HDF5_ERRORS", "DatasetWriter", "LazyH5File",
+    "TRUNCATIONS", "VECTOR_CHUNK_BYTES", "HDF5_ERRORS", "DatasetWriter", "FileIdentity",
+    "LazyH5File",
     "ObservationReader", "action_column", "attr_value", "check_global_heaps", "check_header",
     "chunk_rows", "episode_column", "expected_rows", "h5_column", "hdf5_errors", "open_h5",
     "open_h5_file",

@@ -1,8 +1,7 @@
-"""Reading a dataset file: :func:`open_h5`, the lazy per-process handle, column readers.
+"""Reading a dataset file: :func:`open_h5` and column readers.
 
-:class:`ObservationReader` decodes palette-encoded observations transparently;
-:class:`LazyH5File` is the one read handle of a :class:`~abco_data.dataset.Dataset` or a torch
-view, opened on first use in the process that reads (h5py handles must not cross a fork).
+:class:`ObservationReader` decodes palette-encoded observations transparently; the lazy
+per-process handle that reads them is :class:`abco_data.format.handle.LazyH5File`.
 
 Every file is checked by :func:`~abco_data.format.heaps.check_global_heaps` before HDF5 opens
 it, and every HDF5 error met while reading (``OSError``, ``RuntimeError``, ``KeyError``)
@@ -19,7 +18,6 @@ import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
 
 import h5py
 import numpy as np
@@ -30,7 +28,7 @@ from abco_data.format.schema import OBSERVATION_ENCODINGS, OBSERVATIONS, PALETTE
 from abco_data.palette import MAX_COLOURS, PaletteDecoder
 
 __all__ = ["HDF5_ERRORS", "open_h5", "open_h5_file", "hdf5_errors", "h5_column",
-           "read_column", "read_rows", "ObservationReader", "LazyH5File"]
+           "read_column", "read_rows", "ObservationReader"]
 
 #: What h5py raises for a damaged file: ``OSError`` (unreadable data), ``RuntimeError``
 #: (inconsistent metadata) and ``KeyError`` (an object that cannot be opened).
@@ -317,65 +315,3 @@ def open_h5(path: str | os.PathLike[str]) -> Iterator[h5py.File]:
         yield f
     finally:
         f.close()
-
-
-class LazyH5File:
-    """A read-only h5py handle on ``path``, opened on first use by the process that uses it.
-
-    After a fork (a ``DataLoader`` worker) the child opens its own handle instead of using
-    the parent's; pickling drops the handle. :meth:`close` closes it; the next use reopens.
-
-    Args:
-        path: The dataset file.
-
-    Example:
-        >>> import tempfile, os, h5py, numpy as np
-        >>> path = os.path.join(tempfile.mkdtemp(), "x.h5")
-        >>> with h5py.File(path, "w") as f:
-        ...     f["observations"] = np.arange(3)
-        >>> handle = LazyH5File(path)
-        >>> handle.is_open, int(handle.file()["observations"][2]), handle.is_open
-        (False, 2, True)
-        >>> handle.observations().read().tolist()
-        [0, 1, 2]
-        >>> handle.close(); handle.is_open
-        False
-    """
-
-    def __init__(self, path: str | os.PathLike[str]) -> None:
-        self.path = Path(path)
-        self._file: h5py.File | None = None
-        self._reader: ObservationReader | None = None
-        self._pid = -1
-
-    @property
-    def is_open(self) -> bool:
-        """Whether this process holds an open handle."""
-        return self._file is not None and self._pid == os.getpid()
-
-    def file(self) -> h5py.File:
-        """The handle of this process, opened now if needed."""
-        f = self._file if self.is_open else None
-        if f is None:
-            # A handle inherited over a fork belongs to the parent: forget it, never close it.
-            self._file, self._reader = None, None
-            f = self._file = open_h5_file(self.path)
-            self._pid = os.getpid()
-        return f
-
-    def observations(self) -> ObservationReader:
-        """The observations column of this process's handle (a palette decoded on read)."""
-        f = self.file()
-        if self._reader is None:
-            with hdf5_errors(self.path, "observations"):
-                self._reader = ObservationReader(f)
-        return self._reader
-
-    def close(self) -> None:
-        """Close this process's handle, if open."""
-        f, self._file, self._reader = self._file if self.is_open else None, None, None
-        if f is not None:
-            f.close()
-
-    def __getstate__(self) -> dict[str, Any]:
-        return {"path": self.path, "_file": None, "_reader": None, "_pid": -1}

@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 
 from abco_data.errors import DatasetWriteError
-from abco_data.files import atomic_target
+from abco_data.files import atomic_target, check_target
 from abco_data.format.schema import (
     GZIP_LEVEL,
     IMAGE_GZIP_LEVEL,
@@ -130,7 +130,9 @@ class DatasetWriter:
     root attribute ``observation_encoding`` says which (``"palette4"``, ``"palette"`` or
     ``"raw"``). Nothing reaches ``path`` unless the block
     exits normally; on any error the temp file is removed and ``path`` is left untouched. A
-    full disk (or any ``OSError``) surfaces as :class:`~abco_data.errors.DatasetWriteError`.
+    full disk (or any ``OSError``) surfaces as :class:`~abco_data.errors.DatasetWriteError`; a
+    ``path`` that is not a new path or a regular file (a device, a FIFO, a folder, a symbolic
+    link) as :class:`~abco_data.errors.InvalidTargetError`, when the block starts.
 
     Args:
         path: The target file.
@@ -152,6 +154,7 @@ class DatasetWriter:
         self._columns: dict[str, _Column] = {}
 
     def __enter__(self) -> DatasetWriter:
+        check_target(self.path)  # a device, FIFO, folder or link: refused before any work
         # The file is built in memory and written out in one piece at the end: HDF5 never
         # writes to disk, so a full disk is an OSError of a plain write (no HDF5 file left
         # half-closed, which h5py would later close again from the garbage collector).

@@ -34,11 +34,16 @@ from abco_envs.maze.rules import START_POSITION, Action, goal_position
 
 __all__ = [
     "LAYOUT_SOURCES",
+    "MAX_IMAGE_SIDE",
+    "MAX_MAZE_SIZE",
+    "MAX_NUM_ENVS",
+    "MAX_VECTOR_BYTES",
     "RESET_OPTIONS",
     "check_action",
     "check_actions",
     "check_env_options",
     "check_layout_index",
+    "check_num_envs",
     "check_render_mode",
     "check_reset_options",
     "check_start",
@@ -51,6 +56,15 @@ __all__ = [
 LAYOUT_SOURCES = (*SPLITS, "procedural", "fresh")
 #: Smallest maze of each split beyond the pool (small grids have too few layouts).
 _MIN_SIZE = {"procedural": MIN_PROCEDURAL_SIZE, "fresh": MIN_FRESH_SIZE}
+#: Largest ``image_size`` side, in pixels (a 4096x4096 frame takes 48 MiB).
+MAX_IMAGE_SIDE = 4096
+#: Largest maze, in cells a side (drawing a split's layouts grows fast with the size: about
+#: 25 s for 200 layouts of 50x50).
+MAX_MAZE_SIZE = 64
+#: Most mazes in one :class:`~abco_envs.maze.vector.MazeVectorEnv`.
+MAX_NUM_ENVS = 65_536
+#: Most memory a vector env's per-maze arrays may take (frames, backgrounds, move tables).
+MAX_VECTOR_BYTES = 16 << 30
 #: The keys a maze env's ``reset(options=...)`` understands.
 RESET_OPTIONS = ("layout", "layout_index", "start")
 
@@ -85,16 +99,17 @@ def check_env_options(size: Any, obs_type: Any, split: Any) -> None:
 
     Raises:
         InvalidOptionError: An unknown ``obs_type`` or ``split``, a ``size`` that is not an
-            integer of at least 2, or a maze too small for the ``procedural`` or ``fresh``
-            split.
+            integer from 2 to :data:`MAX_MAZE_SIZE`, or a maze too small for the
+            ``procedural`` or ``fresh`` split.
     """
     if obs_type not in OBS_TYPES:
         raise InvalidOptionError(f"unknown obs_type {obs_type!r}; expected one of {OBS_TYPES}")
     if split not in LAYOUT_SOURCES:
         raise InvalidOptionError(f"unknown split {split!r}; expected one of {LAYOUT_SOURCES}")
-    if not is_integer(size) or size < 2:
+    if not is_integer(size) or not 2 <= size <= MAX_MAZE_SIZE:
         raise InvalidOptionError(
-            f"a maze needs an integer size of at least 2 cells, got size={_describe(size)}"
+            f"a maze needs an integer size from 2 to {MAX_MAZE_SIZE} cells,"
+            f" got size={_describe(size)}"
         )
     least = _MIN_SIZE.get(split, 2)
     if size < least:
@@ -129,7 +144,8 @@ def resolve_image_size(image_size: Any, size: int | None = None) -> tuple[int, i
 
     Raises:
         InvalidOptionError: Anything else (a string, a pair of floats, a wrong length), a
-            size below 1 pixel, or fewer than 2 pixels per cell.
+            size below 1 pixel, fewer than 2 pixels per cell, or a side above
+            :data:`MAX_IMAGE_SIDE` (checked before anything is drawn).
     """
     if is_integer(image_size):
         height = width = int(image_size)
@@ -147,7 +163,36 @@ def resolve_image_size(image_size: Any, size: int | None = None) -> tuple[int, i
             + ("" if size is None else f" for a {size}x{size} maze: at least 2 pixels per cell"
                f" are needed ({least}x{least})")
         )
+    if height > MAX_IMAGE_SIDE or width > MAX_IMAGE_SIDE:
+        raise InvalidOptionError(
+            f"image_size {image_size!r} is too large: at most {MAX_IMAGE_SIDE} pixels a side"
+            f" (a {height}x{width} frame would take {height * width * 3 / 2**20:,.0f} MiB)"
+        )
     return height, width
+
+
+def check_num_envs(num_envs: Any, size: int, height: int, width: int) -> int:
+    """The ``num_envs`` of a vector env, checked against what its mazes would take.
+
+    Each maze keeps a frame-sized background and its share of the observation batch (and of
+    the batched space's bounds), plus move and wall tables of its cells.
+
+    Raises:
+        InvalidOptionError: Not an integer from 1 to :data:`MAX_NUM_ENVS`, or mazes that
+            would take more than :data:`MAX_VECTOR_BYTES` together.
+    """
+    if not is_integer(num_envs) or not 1 <= num_envs <= MAX_NUM_ENVS:
+        raise InvalidOptionError(
+            f"num_envs must be an integer from 1 to {MAX_NUM_ENVS}, got {_describe(num_envs)}"
+        )
+    per_maze = 4 * height * width * 3 + 64 * size * size
+    if int(num_envs) * per_maze > MAX_VECTOR_BYTES:
+        raise InvalidOptionError(
+            f"num_envs={int(num_envs)} mazes of {height}x{width} frames would take about"
+            f" {int(num_envs) * per_maze / 2**30:,.1f} GiB (at most {MAX_VECTOR_BYTES >> 30}"
+            f" GiB): use at most {MAX_VECTOR_BYTES // per_maze} of them, or smaller frames"
+        )
+    return int(num_envs)
 
 
 def check_action(action: Any) -> int:

@@ -29,6 +29,7 @@ from abco_envs.maze.observation import (
 from abco_envs.maze.options import (
     check_actions,
     check_env_options,
+    check_num_envs,
     check_render_mode,
     check_reset_options,
     check_start,
@@ -98,8 +99,8 @@ class MazeVectorEnv(VectorEnv):
     ) -> None:
         check_env_options(size, obs_type, split)
         check_render_mode(render_mode, self.metadata["render_modes"])
-        if not is_integer(num_envs) or num_envs < 1:
-            raise InvalidOptionError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
+        height, width = resolve_image_size(image_size, size)
+        num_envs = check_num_envs(num_envs, size, height, width)  # before any allocation
         if max_episode_steps is not None and (not is_integer(max_episode_steps)
                                               or max_episode_steps < 1):
             raise InvalidOptionError(
@@ -110,7 +111,7 @@ class MazeVectorEnv(VectorEnv):
         self.num_envs, self.size, self.obs_type, self.split = num_envs, size, obs_type, split
         self.render_mode = render_mode
         self.max_episode_steps = max_episode_steps if max_episode_steps is not None else np.inf
-        self.renderer = MazeRenderer(size, *resolve_image_size(image_size, size))
+        self.renderer = MazeRenderer(size, height, width)
         self.single_action_space = spaces.Discrete(4)
         self.action_space = batch_space(self.single_action_space, num_envs)
         if obs_type == "image":

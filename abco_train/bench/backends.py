@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 import os
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Sequence
 from typing import Any
 
 __all__ = ["BACKENDS", "BackendError", "run_local", "run_ray", "available_cores"]
@@ -26,7 +26,7 @@ __all__ = ["BACKENDS", "BackendError", "run_local", "run_ray", "available_cores"
 BACKENDS = ("local", "ray")
 
 Work = Callable[[dict[str, Any], tuple[str, ...]], dict[str, Any]]
-Outcome = Iterator[tuple[int, "dict[str, Any] | BaseException"]]
+Outcome = Generator[tuple[int, "dict[str, Any] | BaseException"], None, None]
 
 
 class BackendError(RuntimeError):
@@ -52,13 +52,15 @@ def run_local(work: Work, tasks: list[dict[str, Any]], plugins: Sequence[str], j
         pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, max_tasks_per_child=1)
     else:  # Python 3.10 has no max_tasks_per_child: a worker process may run several cells
         pool = ProcessPoolExecutor(max_workers=jobs, mp_context=ctx)
-    with pool:
+    try:
         futures = {pool.submit(work, t, tuple(plugins)): i for i, t in enumerate(tasks)}
         for future in as_completed(futures):
             try:
                 yield futures[future], future.result()
             except Exception as exc:  # the worker process died
                 yield futures[future], exc
+    finally:  # closed early (an error, an interrupt): the cells not started never start
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def run_ray(work: Work, tasks: list[dict[str, Any]], plugins: Sequence[str], jobs: int | None,
@@ -70,11 +72,15 @@ def run_ray(work: Work, tasks: list[dict[str, Any]], plugins: Sequence[str], job
         raise BackendError("--backend ray needs ray: pip install 'abco[ray]'") from None
     started = not ray.is_initialized()
     if started:
-        if address:
-            ray.init(address=address, logging_level=logging.WARNING)
-        else:
-            ray.init(num_cpus=available_cores(), include_dashboard=False,
-                     logging_level=logging.WARNING)  # fmt: skip
+        try:
+            if address:
+                ray.init(address=address, logging_level=logging.WARNING)
+            else:
+                ray.init(num_cpus=available_cores(), include_dashboard=False,
+                         logging_level=logging.WARNING)  # fmt: skip
+        except Exception as exc:  # Ray's own errors: no cluster there, a node that never starts
+            why = " ".join(str(exc).split())[:300]
+            raise BackendError(f"Ray could not start ({type(exc).__name__}: {why})") from None
     try:
         pending: dict[Any, int] = {}
         remotes: dict[int, Any] = {}  # one remote function per CPU request

@@ -6,6 +6,11 @@ over numbers of training layouts; its run folder is ``OUT/{env}/{method}/seed{se
 ``OUT`` is its key in ``results.jsonl`` (:mod:`abco_train.bench.results_log`). The grid runner
 is :mod:`abco_train.bench.grid`.
 
+Every list of the command line is bounded before anything is built from it: seeds are ASCII
+digits up to :data:`~abco_train.config.limits.MAX_SEED`, at most :data:`MAX_CELLS` of them;
+``--layouts`` values from 1 to :data:`~abco_train.config.run.MAX_LAYOUTS`; a plan holds at most
+:data:`MAX_CELLS` cells, and an empty ``--envs`` or ``--methods`` is no plan.
+
 Example:
     >>> parse_seeds("0-2,7")
     [0, 1, 2, 7]
@@ -18,20 +23,27 @@ Example:
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from abco_train.config.run import ConfigError, RunConfig
+from abco_train.bench.records import RecordError, check_name, escape
+from abco_train.config.limits import MAX_SEED
+from abco_train.config.run import MAX_LAYOUTS, ConfigError, RunConfig
 from abco_train.methods.registry import options_class
 
-__all__ = ["Cell", "CELL_FIELDS", "parse_seeds", "parse_list", "parse_layouts", "plan",
-           "cell_config", "check_method_options"]  # fmt: skip
+__all__ = ["Cell", "CELL_FIELDS", "MAX_CELLS", "parse_seeds", "parse_list", "parse_layouts",
+           "plan", "cell_config", "check_method_options"]  # fmt: skip
 
 #: Config fields the grid sets per cell (never trainer overrides).
 CELL_FIELDS = ("env", "method", "seed", "layouts", "run_dir", "quiet", "threads",
                "method_options")  # fmt: skip
+#: Most cells of one grid (its plan, configs and rows are held in memory, and
+#: ``results.jsonl`` is rewritten after every cell); also the most seeds of one ``--seeds``.
+MAX_CELLS = 100_000
+_RANGE = re.compile(r"([0-9]+)(?:\s*-\s*([0-9]+))?", re.ASCII)
 
 
 @dataclass(frozen=True)
@@ -57,24 +69,45 @@ class Cell:
         return folder / f"seed{self.seed}"
 
 
-def parse_seeds(text: str) -> list[int]:
-    """Seeds from ``"0-4"``, ``"0,3,5"`` or mixes like ``"0-2,7"`` (order kept, no repeats).
+def _ranges(text: str, what: str, low: int, high: int, example: str) -> list[int]:
+    """The integers of ``"0-4,7"``-style text (ASCII digits; order kept, no repeats), each in
+    ``[low, high]`` and at most :data:`MAX_CELLS` of them, every bound checked before any list
+    is built.
 
     Raises:
-        ConfigError: A malformed part or an empty range.
+        ConfigError: A malformed part, a value out of range, an empty range, too many values.
     """
-    seeds: list[int] = []
+    found: dict[int, None] = {}
     for part in (p.strip() for p in text.split(",")):
         if not part:
             continue
-        lo, sep, hi = part.partition("-")
-        try:
-            first, last = (int(lo), int(hi)) if sep else (int(part), int(part))
-        except ValueError:
-            raise ConfigError(f"bad seed range {part!r}; expected e.g. 0-4 or 0,2,5") from None
-        if last < first or first < 0:
-            raise ConfigError(f"empty or negative seed range {part!r}")
-        seeds += [s for s in range(first, last + 1) if s not in seeds]
+        m = _RANGE.fullmatch(part)
+        if m is None:
+            raise ConfigError(f"bad {what} {escape(part, 40)!r}; expected e.g. {example}")
+        if any(len(g) > 12 for g in m.groups() if g):
+            raise ConfigError(f"{what} {escape(part, 40)!r} is out of range ({low} to {high:,})")
+        first = int(m.group(1))
+        last = first if m.group(2) is None else int(m.group(2))
+        if last < first:
+            raise ConfigError(f"empty {what} {part!r}")
+        if first < low or last > high:
+            raise ConfigError(f"{what} {part!r} is out of range ({low} to {high:,})")
+        if last - first + 1 > MAX_CELLS - len(found):
+            raise ConfigError(f"more than {MAX_CELLS:,} values in {escape(text, 60)!r}, the most"
+                              " a grid holds")  # fmt: skip
+        found.update(dict.fromkeys(range(first, last + 1)))
+    return list(found)
+
+
+def parse_seeds(text: str) -> list[int]:
+    """Seeds from ``"0-4"``, ``"0,3,5"`` or mixes like ``"0-2,7"`` (order kept, no repeats):
+    ASCII digits, each seed at most :data:`~abco_train.config.run.MAX_SEED`, at most
+    :data:`MAX_CELLS` of them (checked before any list is built).
+
+    Raises:
+        ConfigError: A malformed part, an empty range, a seed out of range, too many seeds.
+    """
+    seeds = _ranges(text, "seed range", 0, MAX_SEED, "0-4 or 0,2,5")
     if not seeds:
         raise ConfigError("no seeds given")
     return seeds
@@ -82,20 +115,16 @@ def parse_seeds(text: str) -> list[int]:
 
 def parse_layouts(text: str) -> list[int]:
     """Numbers of training layouts from ``"100,1000,10000"`` (``10k`` and ``1,000``-style
-    thousands are not accepted: plain integers, comma-separated; order kept, no repeats).
+    thousands are not accepted: plain integers, comma-separated; order kept, no repeats),
+    each from 1 to :data:`~abco_train.config.run.MAX_LAYOUTS`.
 
     Raises:
-        ConfigError: Not a positive integer.
+        ConfigError: Not a positive integer, or over the limit.
     """
-    out: list[int] = []
-    for part in (p.strip() for p in text.split(",")):
-        if not part:
-            continue
-        if not part.isdigit() or int(part) < 1:
-            raise ConfigError(f"bad --layouts value {part!r}; expected positive integers such as"
-                              " 100,1000,10000")  # fmt: skip
-        if int(part) not in out:
-            out.append(int(part))
+    if any(p.strip() and "-" in p for p in text.split(",")):
+        raise ConfigError(f"bad --layouts value {escape(text, 40)!r}; expected positive"
+                          " integers such as 100,1000,10000")  # fmt: skip
+    out = _ranges(text, "--layouts value", 1, MAX_LAYOUTS, "100,1000,10000")
     if not out:
         raise ConfigError("no --layouts given")
     return out
@@ -103,17 +132,33 @@ def parse_layouts(text: str) -> list[int]:
 
 def parse_list(text: str) -> list[str]:
     """Comma-separated names, blanks dropped, order kept, no repeats."""
-    out: list[str] = []
-    for name in (p.strip() for p in text.split(",")):
-        if name and name not in out:
-            out.append(name)
-    return out
+    return list(dict.fromkeys(name for name in (p.strip() for p in text.split(",")) if name))
 
 
 def plan(envs: Sequence[str], methods: Sequence[str], seeds: Sequence[int],
          layouts: Sequence[int | None] = (None,)) -> list[Cell]:  # fmt: skip
     """Every (env, method, layouts, seed) cell, env-major; ``layouts``: numbers of training
-    layouts (``None``: the standard datasets)."""
+    layouts (``None``: the standard datasets).
+
+    Raises:
+        ConfigError: No env, method, seed or layouts; a name that cannot be a folder's; more
+            than :data:`MAX_CELLS` cells (checked before any cell is made).
+    """
+    for given, what in ((envs, "--envs"), (methods, "--methods"), (seeds, "--seeds"),
+                        (layouts, "--layouts")):  # fmt: skip
+        if not given:
+            raise ConfigError(f"no {what} given: the grid would have no cell")
+    for names, what in ((envs, "--envs"), (methods, "--methods")):
+        for name in names:
+            try:
+                check_name(name, what[2:-1])
+            except RecordError as exc:
+                raise ConfigError(f"{what}: {exc}") from None
+    n = len(envs) * len(methods) * len(seeds) * len(layouts)
+    if n > MAX_CELLS:
+        raise ConfigError(f"{n:,} cells ({len(envs)} envs x {len(methods)} methods x"
+                          f" {len(seeds)} seeds x {len(layouts)} layouts); a grid holds at"
+                          f" most {MAX_CELLS:,}")  # fmt: skip
     return [Cell(e, m, int(s), None if k is None else int(k))
             for e in envs for m in methods for k in layouts for s in seeds]  # fmt: skip
 

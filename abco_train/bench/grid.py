@@ -19,9 +19,14 @@ Ray) :mod:`abco_train.bench.backends`; this module runs a grid (:func:`run_grid`
 re-exports the public names of the first two, so that ``abco_train.bench.grid`` is the one
 import a user of the grid needs. The command line is in :mod:`abco_train.cli`. A cell's
 numbers depend only on its config (seed and torch threads included), never on the backend or
-the host: each cell runs in a fresh process seeded by the trainer, with
-``threads = cores // jobs`` decided once by the driver (``--threads`` to fix it, e.g. when a
-cluster's nodes differ from the driver).
+the host: each cell runs in a fresh process seeded by the trainer, with the trainer's one torch
+thread unless ``--threads`` gives another number.
+
+One session writes a grid's folder at a time: :func:`run_grid` holds the folder's lock
+(:mod:`abco_train.bench.lock`) from its first write to its last, and a second session is
+refused at once. Every record it reuses is checked first (:mod:`abco_train.bench.records`): a
+damaged ``results.jsonl`` row or a finished cell's damaged ``final.json`` stops the grid
+with one line naming the file, before any cell runs.
 """
 
 from __future__ import annotations
@@ -31,7 +36,7 @@ import socket
 import sys
 import time
 import traceback
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict
 from datetime import datetime, timezone
 from pathlib import Path
@@ -48,6 +53,8 @@ from abco_train.bench.cells import (
     parse_seeds,
     plan,
 )
+from abco_train.bench.lock import grid_lock
+from abco_train.bench.records import RecordError, check_config, check_final, escape, read_json
 from abco_train.bench.results_log import (
     BENCH_LOG,
     RESULTS_FILE,
@@ -59,13 +66,13 @@ from abco_train.bench.results_log import (
     write_results,
 )
 from abco_train.config.run import ConfigError, RunConfig
-from abco_train.harness.run_folder import FINAL, config_differences, read_json
+from abco_train.harness.run_folder import CONFIG, FINAL, config_differences
 from abco_train.methods.registry import available, load_plugins, resolve_config
 
 __all__ = [
     "Cell", "parse_seeds", "parse_list", "parse_layouts", "plan", "cell_config", "run_cell",
     "result_row",
-    "read_results", "run_grid", "headline", "RESULTS_FILE", "BENCH_LOG",
+    "read_results", "run_grid", "failed_text", "headline", "RESULTS_FILE", "BENCH_LOG",
     "CELL_FIELDS",
 ]  # fmt: skip
 
@@ -114,44 +121,57 @@ def run_grid(
         plugins: Modules or ``.py`` files to import first (in every worker too).
         backend: ``local`` (processes) or ``ray``.
         jobs: Cells at once (local default: the cores; ray default: as the cluster allows).
-        threads: Torch threads per cell (default ``max(1, cores // jobs)``).
+        threads: Torch threads per cell (default 1, the trainer's, whatever ``jobs``).
         address: Ray cluster to join (``ray`` backend).
         quiet: No progress bar or per-cell lines.
 
     Returns:
-        A summary: cells, ran, skipped, failed (keys), wall_s, and the path of the results.
+        A summary: cells, ran, skipped, failed (keys), wall_s, the path of the results (the
+        session's line of the bench log), and failures (why each failed cell failed, one
+        line each; :func:`failed_text` says it in one line).
 
     Raises:
-        ConfigError: Unknown backend, env or method, a bad override, or finished cells of
-            another config.
+        ConfigError: No cell, an unknown backend, env or method, a bad override, or finished
+            cells of another config.
+        RecordError: A damaged record the grid would reuse (``results.jsonl``, a finished
+            cell's ``final.json`` or ``config.json``).
+        GridInUseError: Another session holds the grid's folder.
     """
+    if not cells:
+        raise ConfigError("the grid has no cell (no env, method or seed given)")
     _check_backend_and_methods(backend, cells, plugins)
     check_method_options([c.method for c in cells], overrides, method_options)
     cores = backends.available_cores()
     local_jobs = max(1, jobs or cores)
-    threads = int(threads or max(1, cores // local_jobs))
+    threads = int(threads or 1)  # the trainer's default, whatever the jobs
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out {escape(out)} is not a folder")
     out.mkdir(parents=True, exist_ok=True)
     configs = [cell_config(c, out, overrides, threads, method_options) for c in cells]
-    finished = _finished_cells(cells, configs, out)
-    rows = _results_so_far(out, cells, configs, finished)
-    todo = [i for i, done in enumerate(finished) if not done]
-    write_results(out, rows)
-    session = _Session(out, rows, backend, jobs or local_jobs, threads, len(cells),
-                       len(cells) - len(todo))  # fmt: skip
-    session.log(False)
-    tasks = [configs[i] for i in todo]
-    runner = (
-        backends.run_local(run_cell, tasks, plugins, min(local_jobs, max(len(tasks), 1)))
-        if backend == "local" else backends.run_ray(run_cell, tasks, plugins, jobs, address)
-    )  # fmt: skip
-    _run_tasks(session, runner if tasks else (), [cells[i] for i in todo], tasks, quiet)
-    summary = session.log(True)
+    with grid_lock(out):
+        finished = _finished_cells(cells, configs, out)
+        rows = _results_so_far(out, cells, configs, finished)
+        todo = [i for i, done in enumerate(finished) if not done]
+        write_results(out, rows)
+        session = _Session(out, rows, backend, jobs or local_jobs, threads, len(cells),
+                           len(cells) - len(todo))  # fmt: skip
+        session.log(False)
+        tasks = [configs[i] for i in todo]
+        runner = (
+            backends.run_local(run_cell, tasks, plugins, min(local_jobs, max(len(tasks), 1)))
+            if backend == "local" else backends.run_ray(run_cell, tasks, plugins, jobs, address)
+        )  # fmt: skip
+        try:
+            _run_tasks(session, runner if tasks else (), [cells[i] for i in todo], tasks, quiet)
+        finally:  # a stopped grid stops its backend before the lock is released
+            getattr(runner, "close", lambda: None)()
+        summary = {**session.log(True), "failures": session.failures}
     if not quiet:
         cell_s = sum(session.rows[cells[i].key].get("wall_s") or 0.0 for i in todo)
         print(f"{summary['ran']} cells run, {summary['skipped']} skipped,"
               f" {len(session.failed)} failed; wall {summary['wall_s']:.1f}s (cells"
-              f" {cell_s:.1f}s); results: {summary['results']}")  # fmt: skip
+              f" {cell_s:.1f}s); results: {escape(summary['results'])}")  # fmt: skip
     return summary
 
 
@@ -169,20 +189,62 @@ def _check_backend_and_methods(backend: str, cells: Sequence[Cell], plugins: Seq
 
 def _finished_cells(cells: Sequence[Cell], configs: list[dict[str, Any]], out: Path
                     ) -> list[bool]:  # fmt: skip
-    """Whether each cell has its ``final.json``, every config checked before any cell starts.
+    """Whether each cell has its ``final.json``, every config and every finished cell's
+    records checked before any cell starts.
 
     Raises:
         ConfigError: A bad setting, or a finished cell of another config.
+        RecordError: A finished cell's ``final.json`` or ``config.json`` is damaged or not
+            that cell's (never reused: the message names the file).
     """
     for cfg in configs:
         resolve_config(RunConfig(**cfg))
-    finished = [(Path(cfg["run_dir"]) / FINAL).exists() for cfg in configs]
+    finished = [_is_file(Path(cfg["run_dir"]) / FINAL) for cfg in configs]
+    for cell, cfg, done in zip(cells, configs, finished):
+        if done:
+            _finished_record(cell, Path(cfg["run_dir"]))
     stale = [f"{c.key} ({', '.join(diff)})" for c, cfg, f in zip(cells, configs, finished)
              if f and (diff := _stale(cfg))]  # fmt: skip
     if stale:
-        raise ConfigError(f"finished cells of another config under {out}: {'; '.join(stale)};"
-                         " use another --out or delete them")  # fmt: skip
+        raise ConfigError(f"finished cells of another config under {escape(out)}:"
+                          f" {escape('; '.join(stale), 600)}; use another --out or delete"
+                          " them")  # fmt: skip
     return finished
+
+
+def _is_file(path: Path) -> bool:
+    """``path`` exists (as anything: a folder or a device there is refused when it is read)."""
+    return os.path.lexists(path)
+
+
+def _finished_record(cell: Cell, run_dir: Path) -> dict[str, Any]:
+    """The checked ``final.json`` of a finished cell (its ``config.json`` checked too).
+
+    Raises:
+        RecordError: Either file is damaged, or the record is not this cell's.
+    """
+    final = _checked(run_dir / FINAL, lambda x: check_final(x, _cell_id(cell)))
+    if _is_file(run_dir / CONFIG):
+        _checked(run_dir / CONFIG, check_config)
+    return final
+
+
+def _checked(path: Path, check: Callable[[Any], dict[str, Any]]) -> dict[str, Any]:
+    """The record at ``path``, checked by ``check``.
+
+    Raises:
+        RecordError: It cannot be read or fails the check (the message names the file).
+    """
+    try:
+        return check(read_json(path))
+    except (FileNotFoundError, RecordError) as exc:
+        why = "missing or a broken link" if isinstance(exc, FileNotFoundError) else str(exc)
+        raise RecordError(f"{escape(path)} is not a finished run's record ({why}); the grid"
+                          " does not reuse it: delete it to run the cell again") from None
+
+
+def _cell_id(cell: Cell) -> tuple[str, str, int, int | None]:
+    return cell.env, cell.method, cell.seed, cell.layouts
 
 
 def _stale(config: dict[str, Any]) -> list[str]:
@@ -196,7 +258,7 @@ def _results_so_far(out: Path, cells: Sequence[Cell], configs: list[dict[str, An
     rows = read_results(out)
     for cell, cfg, done in zip(cells, configs, finished):
         if done and rows.get(cell.key, {}).get("status") != "done":  # finished outside bench
-            final = read_json(Path(cfg["run_dir"]) / FINAL)
+            final = _finished_record(cell, Path(cfg["run_dir"]))
             rows[cell.key] = result_row(cfg, final, None, cached_only=True)
     return rows
 
@@ -216,6 +278,8 @@ class _Session:
         self.started = datetime.now(timezone.utc).isoformat(timespec="seconds")
         self.ran = 0
         self.failed: list[str] = []
+        #: Why each failed cell failed (one escaped line each; not in the log).
+        self.failures: dict[str, str] = {}
         self.line = log_size(out)
 
     def record(self, cell: Cell, row: dict[str, Any]) -> None:
@@ -240,12 +304,38 @@ class _Session:
         return summary
 
 
+def _failure(row: dict[str, Any]) -> str:
+    """Why a cell failed, on one line (its error, or its method's message)."""
+    return escape(row.get("error") or (row.get("final") or {}).get("message") or "no reason",
+                  2000)  # fmt: skip
+
+
+def failed_text(summary: dict[str, Any]) -> str:
+    """One line on the failed cells of a session (:func:`run_grid`'s summary): how many, the
+    first with its reason, where the rest are.
+
+    Example:
+        >>> failed_text({"cells": 4, "failed": ["a/b/seed0"], "failures": {"a/b/seed0": "boom"},
+        ...              "results": "out/results.jsonl"})
+        "1 of 4 cells failed: a/b/seed0 (boom); every cell's error is in out/results.jsonl"
+    """
+    failed = summary.get("failed") or []
+    if not failed:
+        return "no cell failed"
+    first = failed[0]
+    why = summary.get("failures", {}).get(first, "")
+    more = f", and {len(failed) - 1} more" if len(failed) > 1 else ""
+    return (f"{len(failed)} of {summary.get('cells')} cells failed: {escape(first)}"
+            + (f" ({why})" if why else "") + f"{more}; every cell's error is in"
+            f" {escape(summary.get('results'))}")
+
+
 def _run_tasks(session: _Session, runner: Iterable[tuple[int, Any]], cells: Sequence[Cell],
                tasks: list[dict[str, Any]], quiet: bool) -> None:  # fmt: skip
     """Record each task's outcome as it comes from the backend, with a progress bar."""
-    from tqdm.auto import tqdm
+    from abco_data.progress import progress_bar
 
-    bar = tqdm(total=session.cells, initial=session.skipped, desc="abco bench", unit="cell",
+    bar = progress_bar(total=session.cells, initial=session.skipped, desc="abco bench", unit="cell",
                disable=quiet)  # fmt: skip
     for i, outcome in runner:
         if isinstance(outcome, BaseException):  # the worker died (e.g. out of memory)
@@ -255,11 +345,12 @@ def _run_tasks(session: _Session, runner: Iterable[tuple[int, Any]], cells: Sequ
         session.record(cells[i], row)
         bar.update(1)
         if row["status"] != "done":
-            why = row.get("error") or (row.get("final") or {}).get("message")
-            bar.write(f"{cells[i].key}: FAILED, {row['status']} ({why})")
+            why = _failure(row)
+            session.failures[cells[i].key] = why
+            bar.write(f"{escape(cells[i].key)}: FAILED, {escape(row['status'])} ({why})")
         elif not quiet:
             score = headline(row["final"])
-            bar.write(f"{cells[i].key}: P={score['performance']:.3f} AER={score['aer']:.3f}"
+            bar.write(f"{escape(cells[i].key)}: P={score['performance']:.3f} AER={score['aer']:.3f}"
                       f" in {row['wall_s']:.1f}s")  # fmt: skip
         session.log(False)
     bar.close()

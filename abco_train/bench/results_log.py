@@ -8,8 +8,10 @@
   (:func:`write_log_line`) so that a killed session still leaves its time up to its last
   finished cell; ``abco report`` sums them (:func:`read_log`).
 
-Both are read by ``abco report`` (:mod:`abco_train.report`); the grid runner
-(:mod:`abco_train.bench.grid`) writes them.
+Both are read by ``abco report`` (:mod:`abco_train.report`), every line checked
+(:mod:`abco_train.bench.records`): the report skips a damaged one and counts it. The grid runner
+(:mod:`abco_train.bench.grid`) writes them under the grid's lock; it refuses a damaged row of
+``results.jsonl`` (rewriting the file would drop it) and keeps every line of the log as it is.
 """
 
 from __future__ import annotations
@@ -20,6 +22,17 @@ from pathlib import Path
 from typing import Any
 
 from abco_train.bench.cells import Cell
+from abco_train.bench.records import (
+    MAX_LOG_BYTES,
+    RecordError,
+    Skipped,
+    check_cell_row,
+    check_log_line,
+    check_row,
+    escape,
+    read_bytes,
+    read_json_lines,
+)
 from abco_train.harness.run_folder import write_atomic
 from abco_train.harness.training_data import KINDS, resolve_dataset
 
@@ -89,14 +102,53 @@ def headline(final: dict[str, Any]) -> dict[str, float]:
     return next(v for v in final.values() if isinstance(v, dict) and "performance" in v)
 
 
-def read_results(out: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
-    """The rows of ``out/results.jsonl`` by cell key (the latest row of a cell wins)."""
+def read_results(out: str | os.PathLike[str], skipped: list[Skipped] | None = None
+                 ) -> dict[str, dict[str, Any]]:  # fmt: skip
+    """The rows of ``out/results.jsonl`` by cell key (the latest row of a cell wins).
+
+    Args:
+        out: The grid's folder.
+        skipped: Where a damaged row goes (:class:`~abco_train.bench.records.Skipped`; every
+            row checked as the report reads it, :func:`~abco_train.bench.records.check_row`);
+            ``None``: a row whose cell cannot be read is an error (``abco bench``, which
+            rewrites the file, never drops a row).
+
+    Raises:
+        RecordError: ``skipped`` is ``None`` and the file or a row is damaged (the message
+            names the line).
+    """
+    path = Path(out) / RESULTS_FILE
     rows: dict[str, dict[str, Any]] = {}
-    for line in _lines(Path(out) / RESULTS_FILE):
-        row = json.loads(line)
-        cell = Cell(row["env"], row["method"], int(row["seed"]), row.get("layouts"))
-        rows[cell.key] = row
+    for number, row in _records(path, skipped):
+        try:
+            if isinstance(row, RecordError):
+                raise row
+            env, method, seed, layouts = check_cell_row(row) if skipped is None else \
+                _row_cell(check_row(row))  # fmt: skip
+        except RecordError as exc:
+            if skipped is None:
+                raise RecordError(f"{escape(path)} line {number}: {exc}; repair or remove that"
+                                  " line") from None  # fmt: skip
+            skipped.append(Skipped(f"{RESULTS_FILE} line {number}", str(exc)))
+            continue
+        rows[Cell(env, method, seed, layouts).key] = row
     return rows
+
+
+def _row_cell(row: dict[str, Any]) -> tuple[str, str, int, int | None]:
+    return row["env"], row["method"], row["seed"], row.get("layouts")
+
+
+def _records(path: Path, skipped: list[Skipped] | None) -> list[tuple[int, Any]]:
+    """The lines of a JSON-lines file of the grid; a file that cannot be read at all is an
+    error (``skipped`` ``None``) or skipped."""
+    try:
+        return read_json_lines(path)
+    except RecordError as exc:
+        if skipped is None:
+            raise RecordError(f"{escape(path)}: {exc}") from None
+        skipped.append(Skipped(path.name, str(exc)))
+        return []
 
 
 def write_results(out: str | os.PathLike[str], rows: dict[str, dict[str, Any]]) -> None:
@@ -104,9 +156,30 @@ def write_results(out: str | os.PathLike[str], rows: dict[str, dict[str, Any]]) 
     write_atomic(Path(out) / RESULTS_FILE, "".join(json.dumps(r) + "\n" for r in rows.values()))
 
 
-def read_log(out: str | os.PathLike[str]) -> list[dict[str, Any]]:
-    """The sessions of ``out/bench_log.jsonl``, oldest first (none without the file)."""
-    return [json.loads(x) for x in _lines(Path(out) / BENCH_LOG)]
+def read_log(out: str | os.PathLike[str], skipped: list[Skipped] | None = None
+             ) -> list[dict[str, Any]]:  # fmt: skip
+    """The sessions of ``out/bench_log.jsonl``, oldest first (none without the file), each
+    checked (:func:`~abco_train.bench.records.check_log_line`).
+
+    Args:
+        out: The grid's folder.
+        skipped: Where a damaged line goes; ``None``: a damaged line is an error.
+
+    Raises:
+        RecordError: ``skipped`` is ``None`` and the file or a line is damaged.
+    """
+    path = Path(out) / BENCH_LOG
+    sessions = []
+    for number, line in _records(path, skipped):
+        try:
+            if isinstance(line, RecordError):
+                raise line
+            sessions.append(check_log_line(line))
+        except RecordError as exc:
+            if skipped is None:
+                raise RecordError(f"{escape(path)} line {number}: {exc}") from None
+            skipped.append(Skipped(f"{BENCH_LOG} line {number}", str(exc)))
+    return sessions
 
 
 def log_size(out: str | os.PathLike[str]) -> int:
@@ -116,7 +189,8 @@ def log_size(out: str | os.PathLike[str]) -> int:
 
 def write_log_line(out: str | os.PathLike[str], index: int, summary: dict[str, Any]) -> None:
     """Put ``summary`` at line ``index`` of ``out/bench_log.jsonl`` (appended if the log is
-    shorter), atomically, so the log is never half-written."""
+    shorter), atomically, so the log is never half-written; every other line is kept as it
+    is."""
     path = Path(out) / BENCH_LOG
     lines = _lines(path)
     lines[index:index + 1] = [json.dumps(summary)]
@@ -124,5 +198,19 @@ def write_log_line(out: str | os.PathLike[str], index: int, summary: dict[str, A
 
 
 def _lines(path: Path) -> list[str]:
-    """The non-blank lines of ``path`` (none when it does not exist)."""
-    return [x for x in path.read_text().splitlines() if x.strip()] if path.exists() else []
+    """The non-blank lines of ``path`` as they are (none when it does not exist).
+
+    Raises:
+        RecordError: Not a regular file, over the size limit, or not UTF-8 text.
+    """
+    try:
+        data = read_bytes(path, MAX_LOG_BYTES)
+    except FileNotFoundError:
+        return []
+    except RecordError as exc:
+        raise RecordError(f"{escape(path)}: {exc}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise RecordError(f"{escape(path)}: not UTF-8 text") from None
+    return [x for x in text.split("\n") if x.strip()]

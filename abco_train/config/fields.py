@@ -29,14 +29,14 @@ import json
 import math
 import types
 import typing
-from collections.abc import Collection, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import MISSING, Field, asdict, dataclass, field, fields
 from typing import Any, ClassVar
 
 from typing_extensions import Self
 
 __all__ = ["ConfigError", "option", "flag_of", "check_fields", "add_field_options",
-           "MethodOptions", "json_object", "int_list"]  # fmt: skip
+           "MethodOptions", "json_object", "int_list", "count"]  # fmt: skip
 
 
 class ConfigError(ValueError):
@@ -107,7 +107,7 @@ def check_value(f: Field[Any], hint: Any, value: Any, flag: str) -> None:
         if value < low or (exclusive and value == low):
             raise ConfigError(f"{flag} must be {'>' if exclusive else '>='} {low}, got {value}")
     if high is not None and value > high:
-        raise ConfigError(f"{flag} must be <= {high}, got {value}")
+        raise ConfigError(f"{flag} must be <= {high:,}, got {value}")
 
 
 def check_fields(obj: Any, prefix: str = "") -> None:
@@ -139,6 +139,21 @@ def int_list(text: str) -> list[int]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a comma-separated list of integers: {text!r}"
                                          ) from None  # fmt: skip
+
+
+def count(most: int) -> Callable[[str], int]:
+    """An argparse type: an integer from 1 to ``most`` (``count(50)("8") == 8``)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+        if not 1 <= value <= most:
+            raise argparse.ArgumentTypeError(f"must be from 1 to {most:,}, got {value}")
+        return value
+
+    return parse
 
 
 def add_field_options(

@@ -45,11 +45,24 @@ from abco_train.config.defaults import (
     REGIME_DEFAULTS,
 )
 from abco_train.config.fields import ConfigError, add_field_options, check_fields, option
+from abco_train.config.limits import (
+    MAX_BATCH_SIZE,
+    MAX_EVAL_EPISODES,
+    MAX_EVAL_MAX_STEPS,
+    MAX_EXPERT_EPISODES,
+    MAX_ITERATIONS,
+    MAX_PLOT_LAYOUTS,
+    MAX_PRE_TRANSITIONS,
+    MAX_SEED,
+    MAX_THREADS,
+)
 
 __all__ = [
     "RunConfig", "ConfigError", "RUNTIME_FIELDS", "PRESETS", "PROTOCOLS", "ARCHS",
     "CELL_ARCHS", "ARCHS_BY_KIND", "DEVICES", "IDM_INPUTS", "REGIMES", "MAX_LAYOUTS",
-    "MOVED_TO_METHOD_OPTIONS", "env_kind", "known_envs", "comparable", "fresh_evaluation",
+    "MOVED_TO_METHOD_OPTIONS", "MAX_SEED", "MAX_THREADS", "MAX_ITERATIONS", "MAX_BATCH_SIZE",
+    "MAX_PRE_TRANSITIONS", "MAX_EXPERT_EPISODES", "MAX_EVAL_EPISODES", "MAX_EVAL_MAX_STEPS",
+    "MAX_PLOT_LAYOUTS", "env_kind", "known_envs", "comparable", "fresh_evaluation",
     "add_config_options", "config_from_args",
 ]  # fmt: skip
 
@@ -68,8 +81,10 @@ IDM_INPUTS = ("difference", "pair")
 #: ``default``: abco's data and schedule; ``authors``: the authors' (see REGIME_DEFAULTS).
 REGIMES = ("default", "authors")
 ARCHS_BY_KIND = {"maze": ("cnn", "resnet18", *CELL_ARCHS), "classic": ("mlp",)}
-#: ``--layouts`` trains on the first K of the procedural datasets' layouts.
+#: ``--layouts`` trains on the first K of the procedural datasets' layouts (``--eval-layouts``:
+#: no split holds more).
 MAX_LAYOUTS = PROCEDURAL_SPLIT_SIZE
+
 #: Settings that were fields of the run config before they became the BCO family's options
 #: (:class:`abco_train.methods.bco.options.BCOOptions`); a ``config.json`` that has them at
 #: its top level is read with them moved into ``method_options``
@@ -117,34 +132,39 @@ class RunConfig:
                       "MountainCar-v0", "AbcoMaze5x5-v0")  # fmt: skip
     method: str = option("a registered method: bc, bco, bco-alpha, abco, attention, "
                          "sampling-partial, sampling-whole, abco-whole, or a plugin's", "abco")
-    seed: int = option("seed of everything (same seed, same CPU run)", 0, min=0)
+    seed: int = option("seed of everything (same seed, same CPU run)", 0, min=0,
+                     max=MAX_SEED)
     preset: str = option("cpu (compact CNN on images), paper (the paper's ResNet-18) or general "
                          "(mazes: a network that reasons over the whole maze, for unseen layouts)",
                          "cpu", choices=PRESETS)  # fmt: skip
     regime: str = option("default (abco's data and schedule) or authors (the authors': start-cell "
                          "pre-demonstrations without wall hits, one IDM and one policy epoch per "
                          "iteration, alpha 10)", "default", choices=REGIMES)
-    iterations: int | None = option("alpha: iterations 0..alpha run (iterative methods)", min=0)
+    iterations: int | None = option("alpha: iterations 0..alpha run (iterative methods)", min=0,
+                                    max=MAX_ITERATIONS)
     arch: str | None = option("network: mlp (vectors), cnn, resnet18, cellnet or cellplan (images)",
                               choices=ARCHS)  # fmt: skip
     attention: bool | None = option("self-attention in both networks (default: the method's)")
-    batch_size: int | None = option("minibatch size", min=1)
+    batch_size: int | None = option("minibatch size", min=1, max=MAX_BATCH_SIZE)
     lr: float | None = option("Adam learning rate of both networks", min=0.0, exclusive=True)
     pre_transitions: int | None = option("use at most this many pre-demonstration transitions",
-                                         min=1)  # fmt: skip
-    expert_episodes: int | None = option("use at most this many expert episodes", min=1)
+                                         min=1, max=MAX_PRE_TRANSITIONS)  # fmt: skip
+    expert_episodes: int | None = option("use at most this many expert episodes", min=1,
+                                         max=MAX_EXPERT_EPISODES)  # fmt: skip
     layouts: int | None = option("mazes 5x5 and 10x10: train on the first K layouts of the "
                                  "procedural datasets (abco/maze{n}-procedural-{expert,pre}-v0 "
                                  "unless --expert-data/--pre-data name others) (default: the "
                                  "standard datasets, all their layouts)", min=1)
-    eval_episodes: int | None = option("classic control: episodes per evaluation", min=1)
-    eval_layouts: int | None = option("mazes: evaluate the first k layouts only (tests)", min=1)
+    eval_episodes: int | None = option("classic control: episodes per evaluation", min=1,
+                                       max=MAX_EVAL_EPISODES)  # fmt: skip
+    eval_layouts: int | None = option("mazes: evaluate the first k layouts only (tests)", min=1,
+                                      max=MAX_LAYOUTS)  # fmt: skip
     eval_fresh: bool | None = option("mazes: also evaluate the final policy on 100 fresh layouts, "
                                      "in no dataset (default: on with --layouts, else off)")
     protocol: str = option("maze evaluation protocol while training: paper (4th visit of a cell "
                            "ends, return -1) or standard", "paper", choices=PROTOCOLS)
     eval_max_steps: int | None = option("cap on evaluation episode length (default: the env's)",
-                                        min=1)  # fmt: skip
+                                        min=1, max=MAX_EVAL_MAX_STEPS)  # fmt: skip
     expert_data: str | None = option("expert dataset id or HDF5 file (default: the env's)")
     pre_data: str | None = option("pre-demonstration dataset id or HDF5 file (default: the env's)")
     cache_dir: str | None = option("abco dataset cache (default $ABCO_DATA_HOME)")
@@ -152,10 +172,12 @@ class RunConfig:
     device: str = option("where the networks train and act: auto (cuda if available), cpu or "
                          "cuda", "auto", choices=DEVICES)
     threads: int = option("torch threads; 1 stays fast when other processes share the cores "
-                          "(more threads spin-wait on each other under load)", 1, min=1)
+                          "(more threads spin-wait on each other under load)", 1, min=1,
+                         max=MAX_THREADS)
     deterministic: bool = option("deterministic torch kernels", True)
     quiet: bool = option("no progress bars", False)
-    plot_layouts: int = option("mazes: layouts whose paths are drawn", 4, min=0)
+    plot_layouts: int = option("mazes: layouts whose paths are drawn", 4, min=0,
+                               max=MAX_PLOT_LAYOUTS)
     plots: bool = option("draw the figures at the end", True)
     method_options: dict[str, Any] = field(
         default_factory=dict,

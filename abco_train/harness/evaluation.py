@@ -116,11 +116,12 @@ def final_evaluation(
 
 def format_table(final: dict[str, Any]) -> str:
     """The final evaluation as a text table (a failed run: its status and message)."""
+    run = f"{final.get('method')} on {final.get('env')} (seed {final.get('seed')})"
     if final.get("status", "ok") != "ok":
-        return (f"{final['method']} on {final['env']} (seed {final['seed']}): FAILED "
-                f"({final['status']}) at iteration {final.get('iteration')}: {final['message']}")
+        return (f"{run}: FAILED ({final['status']}) at iteration {final.get('iteration')}: "
+                f"{final.get('message')}")  # fmt: skip
     rows = [(k, v) for k, v in final.items() if isinstance(v, dict) and "performance" in v]
-    lines = [f"{final['method']} on {final['env']} (seed {final['seed']})",
+    lines = [run,
              f"{'evaluation':<18}{'P':>8}{'AER':>10}{'success':>9}{'episodes':>10}"]
     for key, m in rows:
         lines.append(f"{key:<18}{m['performance']:>8.3f}{m['aer']:>10.3f}"

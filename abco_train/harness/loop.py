@@ -4,6 +4,11 @@ It writes the run folder described in :mod:`abco_train.harness.run_folder`. Re-r
 finished run's command prints its stored result at once; re-running an interrupted one
 resumes after its last checkpoint (:mod:`abco_train.harness.checkpoint`). Which episodes
 evaluate a run, and its final evaluation: :mod:`abco_train.harness.evaluation`.
+
+A run holds its folder's lock (:func:`abco_train.harness.run_lock.run_folder_lock`) from
+start to end: a second writer of the folder is refused at once. Every file is written whole
+or not at all: a full disk or a read-only folder ends the run with an ``OSError`` naming the
+file, the previous checkpoint, metrics and plots intact.
 """
 
 from __future__ import annotations
@@ -24,11 +29,16 @@ from abco_train.harness.run_folder import (
     CHECKPOINT,
     CONFIG,
     FINAL,
+    MAX_JSON_BYTES,
     METRICS,
     RunFolderError,
+    check_run_dir,
+    config_differences,
     finished_result,
+    read_capped,
     write_atomic,
 )
+from abco_train.harness.run_lock import run_folder_lock
 from abco_train.harness.runtime import resolve_device, seed_everything
 from abco_train.harness.training_data import TrainingData, load_training_data
 from abco_train.methods.base import Method, TrainingFailed
@@ -50,14 +60,28 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
 
     Raises:
         ConfigError: A bad setting, env or method.
-        RunFolderError: The run folder holds a checkpoint of a different config.
+        RunFolderError: The run folder is no folder, holds a checkpoint of a different config
+            or damaged files, or is in use by another process
+            (:class:`~abco_train.harness.run_lock.RunFolderInUseError`).
+        OSError: A file of the run folder cannot be written (a full disk, a read-only
+            folder); what was written before stays as it was.
     """
-    from tqdm.auto import tqdm
-
     cfg = resolve_config(config)
     cfg = cfg.replace(device=resolve_device(cfg.device))
     run_dir = Path(cfg.run_dir or ".")
-    stored = finished_result(run_dir, asdict(cfg))
+    check_run_dir(run_dir)
+    stored = finished_result(run_dir, asdict(cfg))  # read only: a read-only folder answers
+    if stored is not None:
+        return stored
+    with run_folder_lock(run_dir, "abco train"):
+        return _train(cfg, run_dir, stop_after)
+
+
+def _train(cfg: RunConfig, run_dir: Path, stop_after: int | None) -> dict[str, Any] | None:
+    """:func:`train` in its locked run folder."""
+    from abco_data.progress import progress_bar
+
+    stored = finished_result(run_dir, asdict(cfg))  # finished by another process meanwhile?
     if stored is not None:
         return stored
     state = _open_run_folder(run_dir, cfg)
@@ -66,14 +90,17 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
     rng = seed_everything(cfg.seed, cfg.threads, cfg.deterministic)
     data = load_training_data(cfg)
     method = get_method(cfg.method)(cfg, data, rng)
-    start = 0 if state is None else restore(method, state, cfg)
-    history = _read_history(run_dir / METRICS, start) if start else []
-    write_atomic(run_dir / METRICS, "".join(json.dumps(r) + "\n" for r in history))
+    start = 0 if state is None else restore(method, state, cfg, run_dir / CHECKPOINT)
+    history = _read_history(run_dir / METRICS, start, data.n_actions) if start else []
+    if history:
+        _write_history(run_dir, history)  # without the iterations the checkpoint has not
+    elif (run_dir / METRICS).exists():
+        (run_dir / METRICS).unlink()  # a restart; the first iteration writes it anew
 
     # -- iterations -------------------------------------------------------------------------
     total = method.num_iterations
-    bar = tqdm(range(start, total), total=total, initial=start, desc=f"{cfg.method} {cfg.env}",
-               disable=cfg.quiet, unit="iter")  # fmt: skip
+    bar = progress_bar(range(start, total), total=total, initial=start,
+                       desc=f"{cfg.method} {cfg.env}", disable=cfg.quiet, unit="iter")
     for i in bar:
         try:
             record = _iteration(method, cfg, data, i)
@@ -81,8 +108,7 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
             bar.close()
             return _failed(cfg, run_dir, i, failure, history, dict(method.interactions))
         history.append(record)
-        with (run_dir / METRICS).open("a") as f:
-            f.write(json.dumps(record) + "\n")
+        _write_history(run_dir, history)
         save_checkpoint(run_dir / CHECKPOINT, i, method, cfg)
         bar.set_postfix(P=f"{record['eval']['performance']:.3f}",
                         win=f"{record['eval']['success_rate']:.2f}")  # fmt: skip
@@ -101,9 +127,12 @@ def _open_run_folder(run_dir: Path, cfg: RunConfig) -> dict[str, Any] | None:
     the checkpoint's state, if any.
 
     Raises:
-        RunFolderError: The folder holds a run of another config.
+        RunFolderError: The folder holds a run of another config (a checkpoint, or a
+            ``final.json``: never replaced), or a damaged checkpoint.
     """
-    run_dir.mkdir(parents=True, exist_ok=True)
+    if (run_dir / FINAL).exists() and config_differences(run_dir, asdict(cfg)):
+        raise RunFolderError(f"{run_dir} holds a run of another config (finished); use "
+                             "another --run-dir or delete it")  # fmt: skip
     state = load_checkpoint(run_dir / CHECKPOINT, cfg.device)
     if state is not None and identity(state["config"]) != identity(asdict(cfg)):
         raise RunFolderError(
@@ -151,25 +180,56 @@ def _failed(
     """Record a failed run: its last iteration's statistics, and a ``final.json`` with the
     failure's status and message and no evaluation (nothing to average by mistake)."""
     record = {"iteration": iteration, "train": failure.stats, "status": failure.status}
-    with (run_dir / METRICS).open("a") as f:
-        f.write(json.dumps(record) + "\n")
+    _write_history(run_dir, [*history, record])
     final = {"env": cfg.env, "method": cfg.method, "seed": cfg.seed, "status": failure.status,
              "message": str(failure), "iteration": iteration, "interactions": interactions,
              "seconds": float(sum(h["seconds"] for h in history))}  # fmt: skip
     write_atomic(run_dir / FINAL, json.dumps(final, indent=2))
     return final
 
-def _read_history(path: Path, start: int) -> list[dict[str, Any]]:
-    """The metrics of iterations before ``start``; a damaged last line is dropped (the
-    iteration it belonged to is re-run from its checkpoint only if the checkpoint is older)."""
+
+def _write_history(run_dir: Path, history: list[dict[str, Any]]) -> None:
+    """``metrics.jsonl``, whole (a full disk leaves the previous one, never a cut line)."""
+    write_atomic(run_dir / METRICS, "".join(json.dumps(r) + "\n" for r in history))
+
+
+def _read_history(path: Path, start: int, n_actions: int) -> list[dict[str, Any]]:
+    """The metrics of iterations before ``start``, one per iteration; a line that is no
+    metrics record (cut short by a kill, or damaged) is dropped.
+
+    Raises:
+        RunFolderError: ``metrics.jsonl`` is no regular file or too large.
+    """
     if not path.exists():
         return []
-    history = []
-    for line in path.read_text().splitlines():
+    history: dict[int, dict[str, Any]] = {}
+    for line in read_capped(path, MAX_JSON_BYTES).decode("utf-8", "replace").splitlines():
         try:
             record = json.loads(line)
-        except json.JSONDecodeError:
+        except (ValueError, RecursionError):
             continue  # a line cut short by a kill; its iteration is in the checkpoint or redone
-        if isinstance(record, dict) and record.get("iteration", start) < start:
-            history.append(record)
-    return history
+        if _is_record(record, n_actions) and record["iteration"] < start:
+            history[record["iteration"]] = record
+    return [history[i] for i in sorted(history)]
+
+
+def _is_record(record: Any, n_actions: int) -> bool:
+    """Whether ``record`` is an iteration's metrics as :func:`_iteration` writes them (as far
+    as the plots and ``final.json`` read them)."""
+    def number(x: Any) -> bool:
+        return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+    def numbers(x: Any, n: int | None = None) -> bool:
+        return isinstance(x, list) and all(map(number, x)) and n in (None, len(x))
+
+    if not isinstance(record, dict) or type(record.get("iteration")) is not int:
+        return False
+    stats, evaluation = record.get("train"), record.get("eval")
+    labels, per_class = record.get("label_distribution"), None
+    if isinstance(stats, dict):
+        per_class = stats.get("idm_val_class_accuracy")
+        stats = all(number(stats[k]) for k in ("idm_val_accuracy", "idm_chance") if k in stats)
+    return (number(record.get("seconds")) and stats is True and isinstance(evaluation, dict)
+            and all(number(evaluation.get(k)) for k in ("performance", "aer", "success_rate"))
+            and (labels is None or numbers(labels, n_actions))
+            and (per_class is None or numbers(per_class)))

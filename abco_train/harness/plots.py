@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from abco_train.harness.run_folder import write_atomic
+
 __all__ = ["plot_metrics", "plot_label_distribution", "plot_maze_paths", "pyplot",
            "action_names", "save_figure"]  # fmt: skip
 
@@ -40,11 +42,21 @@ def action_names(n_actions: int) -> list[str]:
 
 
 def save_figure(fig: Any, path: Path) -> Path:
-    """Lay out ``fig``, write it to ``path`` (PNG, 100 dpi) and close it."""
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    pyplot().close(fig)
-    return path
+    """Lay out ``fig``, write it to ``path`` (PNG, 100 dpi) and close it.
+
+    The PNG is written whole or not at all (:func:`abco_train.harness.run_folder.write_atomic`):
+    a full disk or a read-only folder leaves the previous plot, never a cut or empty file.
+
+    Raises:
+        RunFolderError: ``path`` is not a new path or a regular file.
+        OSError: It cannot be written.
+    """
+    try:
+        fig.tight_layout()
+        write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=100, format="png"))
+    finally:
+        pyplot().close(fig)
+    return Path(path)
 
 
 def plot_metrics(history: list[dict[str, Any]], path: Path) -> Path:

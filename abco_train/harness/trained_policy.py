@@ -4,7 +4,12 @@
 CPU, whatever device trained it) and returns a :class:`Policy`: observations in, greedy
 actions out. Its :meth:`Policy.evaluate` repeats the run's final evaluation, and gives the
 numbers of ``final.json`` back exactly. :func:`record_gif` rolls it out on chosen layouts (or
-reset seeds) and writes an animated GIF (``abco play``).
+reset seeds) and writes an animated GIF (``abco play``), whole or not at all, never over
+anything but a regular file: it may run beside a training that writes the same folder.
+
+A run folder may come from elsewhere: it is read defensively (regular files only, a bounded
+``config.json``, a checkpoint of data only whose state must fit the run's method), and what is
+wrong with it is a :class:`~abco_train.harness.run_folder.RunFolderError` in one line.
 
 Example (a run folder made by ``abco train``)::
 
@@ -25,9 +30,16 @@ from typing import Any, cast
 import numpy as np
 
 from abco_train.config.run import ConfigError, RunConfig, env_kind
-from abco_train.harness.checkpoint import load_checkpoint
+from abco_train.harness.checkpoint import load_checkpoint, load_method_state
 from abco_train.harness.evaluation import final_evaluation
-from abco_train.harness.run_folder import CHECKPOINT, CONFIG, RunFolderError, read_json
+from abco_train.harness.run_folder import (
+    CHECKPOINT,
+    CONFIG,
+    RunFolderError,
+    check_output,
+    read_json,
+    write_atomic,
+)
 from abco_train.harness.runtime import resolve_device, seed_everything
 from abco_train.harness.training_data import TrainingData, load_training_data
 from abco_train.methods.base import Method
@@ -84,24 +96,31 @@ def load_policy(run_dir: str | os.PathLike[str], *, device: str = "cpu", quiet: 
         quiet: No progress bars while the datasets are read.
 
     Raises:
-        RunFolderError: No run there, or its files are damaged.
+        RunFolderError: No run there, or its files are damaged (or not abco's): a config
+            abco cannot read, a checkpoint that is no data, of another iteration count or
+            whose state does not fit the run's method.
+        ConfigError: The run's method is unknown (a plugin's, without its ``--plugin``).
     """
     run_dir = Path(run_dir)
-    if not (run_dir / CONFIG).exists() or not (run_dir / CHECKPOINT).exists():
+    config, checkpoint = run_dir / CONFIG, run_dir / CHECKPOINT
+    if not os.path.lexists(config) or not os.path.lexists(checkpoint):
         raise RunFolderError(f"{run_dir} holds no trained run ({CONFIG} and {CHECKPOINT})")
+    record = read_json(config)
     try:
-        cfg = config_from_record(read_json(run_dir / CONFIG))
-    except (ConfigError, TypeError) as exc:
-        raise RunFolderError(f"{run_dir / CONFIG} holds no config abco can read: {exc}") from None
+        if not isinstance(record, dict):
+            raise TypeError(f"a JSON {type(record).__name__}, not an object")
+        cfg = config_from_record(record).validate()
+    except (ConfigError, TypeError, ValueError) as exc:
+        raise RunFolderError(f"{config} holds no config abco can read: {exc}") from None
     cfg = cfg.replace(run_dir=str(run_dir), quiet=quiet, device=resolve_device(device))
-    state = load_checkpoint(run_dir / CHECKPOINT, cfg.device)
-    assert state is not None, f"{run_dir / CHECKPOINT} vanished"  # it existed just above
+    state = load_checkpoint(checkpoint, cfg.device)
+    if state is None:
+        raise RunFolderError(f"{checkpoint} vanished while it was read")
     rng = seed_everything(cfg.seed, cfg.threads, cfg.deterministic)
     data = load_training_data(cfg)
     method = get_method(cfg.method)(cfg, data, rng)
-    method.load_state_dict(state["method"])
-    method.interactions.update(state.get("interactions", {}))
-    return Policy(cfg, method, data, int(state["iteration"]))
+    iteration = load_method_state(method, state, checkpoint)
+    return Policy(cfg, method, data, iteration)
 
 
 def _upscale(frame: np.ndarray, min_side: int = 256) -> np.ndarray:
@@ -132,16 +151,22 @@ def record_gif(
 
     Returns:
         The path written.
+
+    Raises:
+        RunFolderError: ``path`` is not a new path or a regular file (left untouched).
+        OSError: It cannot be written (a full disk, a read-only folder; no file is left).
     """
     import gymnasium as gym
     from PIL import Image
-    from tqdm.auto import tqdm
 
+    from abco_data.progress import progress_bar
+
+    check_output(path)  # before the rollouts
     cfg, maze = policy.config, env_kind(policy.config.env) == "maze"
     kwargs = {**policy.data.env_kwargs, **({"split": split} if maze else {})}
     env = gym.make(cfg.env, render_mode=None if maze else "rgb_array", **kwargs)
     frames: list[np.ndarray] = []
-    for episode in tqdm(list(episodes), desc="episodes", disable=not progress, unit="ep"):
+    for episode in progress_bar(list(episodes), desc="episodes", disable=not progress, unit="ep"):
         options = {"layout_index": int(episode), "start": (0, 0)} if maze else None
         obs, _ = env.reset(seed=int(episode), options=options)
         # gymnasium types render() by render mode; "rgb_array" gives one frame, an array
@@ -154,9 +179,7 @@ def record_gif(
                 break
         frames += [frames[-1]] * max(1, fps // 2)  # a short pause between episodes
     env.close()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     images = [Image.fromarray(f) for f in frames]
-    images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / fps),
-                   loop=0)  # fmt: skip
-    return path
+    return write_atomic(path, lambda tmp: images[0].save(
+        tmp, format="GIF", save_all=True, append_images=images[1:], duration=int(1000 / fps),
+        loop=0))  # fmt: skip

@@ -157,8 +157,22 @@ class Method(ABC):
 
     @abstractmethod
     def state_dict(self) -> dict[str, Any]:
-        """Everything needed to resume after the current iteration (picklable)."""
+        """Everything needed to resume after the current iteration, as data.
+
+        Data only: tensors (a module's or an optimiser's ``state_dict()``), numpy arrays of
+        numbers, bools or strings, Python numbers, strings, bools and ``None``, and lists,
+        tuples and dicts of them (a numpy generator's ``bit_generator.state`` is such a dict).
+        No objects of other classes: checkpoints are read with
+        ``torch.load(weights_only=True)``, which builds nothing else and so runs no code. The
+        harness stores numpy arrays as tensors and gives them back as the same arrays (dtype,
+        shape, every bit), so a resumed run is the run it would have been.
+        """
 
     @abstractmethod
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore :meth:`state_dict`."""
+        """Restore :meth:`state_dict`.
+
+        ``state`` comes from a file and may be damaged: raise ``KeyError``, ``TypeError`` or
+        ``ValueError`` (a tensor of another size: torch's ``RuntimeError``) on what does not
+        fit; the harness refuses the checkpoint in one line.
+        """

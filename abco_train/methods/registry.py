@@ -149,6 +149,11 @@ def identity(values: Mapping[str, Any]) -> dict[str, Any]:
         return comparable(values)
 
 
+#: The methods that each plugin (by module name) registered when it was imported: a plugin is
+#: imported once, and :func:`load_plugins` may be asked for it again.
+_PLUGIN_METHODS: dict[str, tuple[str, ...]] = {}
+
+
 def load_plugins(plugins: Sequence[str]) -> None:
     """Import each plugin: a ``.py`` file path or a module name (``my_pkg.my_method``).
 
@@ -156,30 +161,53 @@ def load_plugins(plugins: Sequence[str]) -> None:
     module ``abco_plugin_{stem}``.
 
     Raises:
-        PluginError: A missing file or module, or one that fails to import (the message
-            names it and the reason; the original exception is chained).
+        PluginError: A missing file or module, one that fails to import (the message names it
+            and the reason; the original exception is chained), or one that registers no
+            method.
     """
     for plugin in plugins:
-        if plugin.endswith(".py") or Path(plugin).is_file():
-            path = Path(plugin).resolve()
-            if not path.is_file():
-                raise PluginError(f"plugin file {plugin} does not exist")
-            name = f"abco_plugin_{path.stem}"
-            if name in sys.modules:
-                continue
-            spec = importlib.util.spec_from_file_location(name, path)
-            if spec is None or spec.loader is None:
-                raise PluginError(f"cannot import plugin file {plugin}")
-            module = importlib.util.module_from_spec(spec)
-            sys.modules[name] = module
-            try:
-                spec.loader.exec_module(module)
-            except Exception as exc:
-                del sys.modules[name]
-                raise PluginError(f"plugin {plugin} failed to import: "
-                                  f"{type(exc).__name__}: {exc}") from exc  # fmt: skip
-        else:
-            try:
-                importlib.import_module(plugin)
-            except ModuleNotFoundError as exc:
-                raise PluginError(f"plugin module {plugin!r} not found ({exc})") from exc
+        before = dict(_REGISTRY)
+        module = _import_plugin(plugin)
+        if module not in _PLUGIN_METHODS:
+            builtin = set(builtin_options())  # imported by the plugin, perhaps: not its own
+            _PLUGIN_METHODS[module] = tuple(
+                name for name, cls in _REGISTRY.items()
+                if before.get(name) is not cls
+                and not (name in builtin and cls.__module__ in BUILTIN_MODULES)
+            ) or tuple(name for name, cls in _REGISTRY.items()  # imported before, elsewhere
+                       if f"{cls.__module__}.".startswith(f"{module}."))  # fmt: skip
+        if not _PLUGIN_METHODS[module]:
+            raise PluginError(f"plugin {plugin} registered no method (a plugin registers its "
+                              "methods with abco_train.methods.register)")  # fmt: skip
+
+
+def _import_plugin(plugin: str) -> str:
+    """Import ``plugin`` (once); its module name."""
+    if plugin.endswith(".py") or Path(plugin).is_file():
+        path = Path(plugin).resolve()
+        if not path.is_file():
+            raise PluginError(f"plugin file {plugin} does not exist")
+        name = f"abco_plugin_{path.stem}"
+        if name in sys.modules:
+            return name
+        spec = importlib.util.spec_from_file_location(name, path)
+        if spec is None or spec.loader is None:
+            raise PluginError(f"cannot import plugin file {plugin}")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        try:
+            spec.loader.exec_module(module)
+        except Exception as exc:
+            del sys.modules[name]
+            raise PluginError(f"plugin {plugin} failed to import: "
+                              f"{type(exc).__name__}: {exc}") from exc  # fmt: skip
+        return name
+    try:
+        importlib.import_module(plugin)
+    except Exception as exc:
+        missing = isinstance(exc, ModuleNotFoundError) and exc.name is not None and \
+            f"{plugin}.".startswith(f"{exc.name}.")  # the plugin itself, not a module it imports
+        raise PluginError(f"plugin module {plugin!r} not found ({exc})" if missing else
+                          f"plugin {plugin} failed to import: {type(exc).__name__}: {exc}"
+                          ) from exc  # fmt: skip
+    return plugin

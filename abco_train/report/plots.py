@@ -27,7 +27,7 @@ ByCell = Mapping[tuple[str, str], Sequence[Any]]
 def _series(runs: Sequence[Any], pick: Callable[[dict[str, Any]], float | None]) -> np.ndarray:
     """``(seeds, iterations)`` of ``pick(record)`` (NaN where a run has fewer iterations)."""
     histories = [r.metrics() for r in runs]
-    length = max((len(h) for h in histories), default=0)
+    length = max((rec["iteration"] + 1 for h in histories for rec in h), default=0)
     out = np.full((len(runs), length), np.nan)
     for i, h in enumerate(histories):
         for rec in h:
@@ -100,7 +100,7 @@ def plot_label_distributions(by_cell: ByCell, env: str, methods: Sequence[str], 
             with np.errstate(all="ignore"):
                 (line,) = ax.plot(np.arange(share.shape[1]), np.nanmean(share, 0), marker="o",
                                   ms=3, label=names[a])  # fmt: skip
-            if truth:
+            if truth and len(truth) == n_actions:
                 ax.axhline(truth[a], color=line.get_color(), ls="--", lw=1)
         ax.set_title(f"{method} on {env} (dashed: expert's true shares)", fontsize=9)
         ax.set_xlabel("iteration")

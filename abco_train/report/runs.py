@@ -1,7 +1,9 @@
 """The runs of an ``abco bench`` grid, as ``abco report`` reads them, and the tables' names.
 
 :func:`load_runs` reads every ``RUNS_DIR/{env}/{method}/seed{seed}`` folder (its
-``final.json``, and its row of ``results.jsonl``); :class:`Grid` indexes them by cell. The
+``final.json``, and its row of ``results.jsonl``), each record checked
+(:mod:`abco_train.bench.records`): a damaged one is skipped and counted; :class:`Grid`
+indexes them by cell. The
 report (:mod:`abco_train.report.write`) and its tables (:mod:`abco_train.report.tables`) build on
 these.
 
@@ -14,7 +16,6 @@ Example:
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +24,17 @@ from typing import Any
 import numpy as np
 
 import abco_envs
+from abco_train.bench.records import (
+    RecordError,
+    Skipped,
+    check_final,
+    check_metrics_line,
+    check_name,
+    layouts_of,
+    read_json,
+    read_json_lines,
+    seed_of,
+)
 from abco_train.bench.results_log import read_results
 from abco_train.config.run import env_kind
 from abco_train.harness.run_folder import FINAL, METRICS
@@ -100,21 +112,44 @@ class Run:
     row: dict[str, Any] = field(default_factory=dict)
     #: K of a run on the first K procedural layouts; ``None``: the standard datasets.
     layouts: int | None = None
+    #: Why the run's ``final.json`` was skipped (damaged, or not this cell's), else ``None``.
+    damaged: str | None = None
+    #: The run folder relative to the grid's, and where the records it skips go.
+    where: str = ""
+    skipped: list[Skipped] = field(default_factory=list, repr=False, compare=False)
+    _history: list[dict[str, Any]] | None = field(default=None, init=False, repr=False,
+                                                  compare=False)  # fmt: skip
 
     @property
     def status(self) -> str:
-        """``ok`` (a result), ``unfinished`` (no final.json), or the status of a run its
-        method stopped (e.g. ``idm_at_chance``: no result, by design)."""
+        """``ok`` (a result), ``unfinished`` (no final.json), ``damaged`` (a final.json that
+        was skipped), or the status of a run its method stopped (e.g. ``idm_at_chance``: no
+        result, by design)."""
+        if self.damaged is not None:
+            return "damaged"
         if self.final is None:
             return "unfinished"
         return str(self.final.get("status", "ok"))
 
     def metrics(self) -> list[dict[str, Any]]:
-        """The per-iteration records of ``metrics.jsonl``."""
-        path = self.path / METRICS
-        if not path.exists():
-            return []
-        return [json.loads(x) for x in path.read_text().splitlines() if x.strip()]
+        """The per-iteration records of ``metrics.jsonl`` (checked; a damaged line is skipped
+        and counted in :attr:`skipped`)."""
+        if self._history is None:
+            self._history = []
+            where = f"{self.where}/{METRICS}".lstrip("/")
+            try:
+                lines = read_json_lines(self.path / METRICS)
+            except RecordError as exc:
+                self.skipped.append(Skipped(where, str(exc)))
+                lines = []
+            for number, record in lines:
+                try:
+                    if isinstance(record, RecordError):
+                        raise record
+                    self._history.append(check_metrics_line(record))
+                except RecordError as exc:
+                    self.skipped.append(Skipped(f"{where} line {number}", str(exc)))
+        return self._history
 
     def values(self, evaluation: str, metric: str) -> np.ndarray | None:
         """Per-episode values when recorded, else the one score; ``None`` if absent."""
@@ -132,30 +167,61 @@ class Run:
         return int(counts[kind]) if isinstance(counts, dict) and kind in counts else None
 
 
-def _layouts_of(name: str) -> int | None:
-    """K of a ``layouts{K}`` folder name, else ``None``."""
-    return int(name[7:]) if name.startswith("layouts") and name[7:].isdigit() else None
-
-
-def load_runs(runs_dir: str | Path) -> list[Run]:
-    """Every run folder ``{env}/{method}/seed{seed}`` and ``{env}/{method}/layouts{K}/seed{seed}``
-    under ``runs_dir`` (finished or not)."""
-    runs_dir = Path(runs_dir)
-    rows = read_results(runs_dir)
-    runs = []
+def _seed_folders(runs_dir: Path, skipped: list[Skipped]
+                  ) -> list[tuple[Path, str, str, int | None, int]]:  # fmt: skip
+    """``(folder, env, method, layouts, seed)`` of every run folder under ``runs_dir``; a
+    folder whose name cannot be a run's (``seed٣``, ``seed²``, ``layoutsX``, a control
+    character in an env's name) is skipped and counted."""
+    found = []
     paths = [*runs_dir.glob("*/*/seed*"), *runs_dir.glob("*/*/layouts*/seed*")]
     for path in sorted(paths):
-        if not path.is_dir() or not path.name[4:].isdigit():
+        if not path.is_dir():
             continue
-        layouts = _layouts_of(path.parent.name)
-        if path.parent.name.startswith("layouts") and layouts is None:
+        where = path.relative_to(runs_dir).as_posix()
+        has_layouts = len(path.relative_to(runs_dir).parts) == 4
+        method_dir = path.parent.parent if has_layouts else path.parent
+        try:
+            seed = seed_of(path.name)
+            if seed is None:
+                raise RecordError("not a run folder's name (seed and ASCII digits, e.g. seed3)")
+            layouts = layouts_of(path.parent.name) if has_layouts else None
+            if has_layouts and layouts is None:
+                raise RecordError("not a run folder (layouts and ASCII digits, e.g. layouts100)")
+            env = check_name(method_dir.parent.name, "env")
+            method = check_name(method_dir.name, "method")
+        except RecordError as exc:
+            skipped.append(Skipped(where, str(exc)))
             continue
-        final_path = path / FINAL
-        final = json.loads(final_path.read_text()) if final_path.exists() else None
-        method_dir = path.parent if layouts is None else path.parent.parent
-        env, method, seed = method_dir.parent.name, method_dir.name, int(path.name[4:])
-        row = rows.get(path.relative_to(runs_dir).as_posix(), {})
-        runs.append(Run(env, method, seed, path, final, row, layouts))
+        found.append((path, env, method, layouts, seed))
+    return found
+
+
+def load_runs(runs_dir: str | Path, skipped: list[Skipped] | None = None) -> list[Run]:
+    """Every run folder ``{env}/{method}/seed{seed}`` and ``{env}/{method}/layouts{K}/seed{seed}``
+    under ``runs_dir`` (finished or not), every record checked as it is read.
+
+    Args:
+        runs_dir: The grid's folder.
+        skipped: Where every record that is skipped goes (a damaged ``results.jsonl`` row, a
+            ``final.json`` that is damaged or another cell's, a folder name that cannot be a
+            run's; later, the damaged lines of ``metrics.jsonl`` as the runs read them).
+    """
+    runs_dir = Path(runs_dir)
+    skipped = [] if skipped is None else skipped
+    rows = read_results(runs_dir, skipped)
+    runs = []
+    for path, env, method, layouts, seed in _seed_folders(runs_dir, skipped):
+        where = path.relative_to(runs_dir).as_posix()
+        final, damaged = None, None
+        try:
+            final = check_final(read_json(path / FINAL), (env, method, seed, layouts))
+        except FileNotFoundError:
+            pass
+        except RecordError as exc:
+            damaged = str(exc)
+            skipped.append(Skipped(f"{where}/{FINAL}", damaged))
+        runs.append(Run(env, method, seed, path, final, rows.get(where, {}), layouts, damaged,
+                        where, skipped))  # fmt: skip
     return runs
 
 
@@ -165,7 +231,7 @@ class Grid:
     def __init__(self, runs: list[Run]) -> None:
         self.runs = runs
         self.done = [r for r in runs if r.status == "ok"]
-        self.stopped = [r for r in runs if r.status not in ("ok", "unfinished")]
+        self.stopped = [r for r in runs if r.status not in ("ok", "unfinished", "damaged")]
         self.seeds = sorted({r.seed for r in runs})
         self.methods = method_order({r.method for r in runs})
         self.by_cell: dict[tuple[str, str], list[Run]] = {}

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from abco_train.bench.records import Skipped, escape
 from abco_train.bench.results_log import read_log
 from abco_train.methods.base import INTERACTION_KINDS
 from abco_train.report.runs import (
@@ -131,32 +132,44 @@ def _verdict(s: CellStats | None, target: float, stopped: int) -> str:
 
 
 def goals(grid: Grid, wall_s: float | None) -> list[str]:
-    """ABCO's goals per env; IUPE and ILPO against their published AER; the grid's wall time."""
-    lines = ["ABCO(α): AER at or above the paper's ABCO, P at or above"
-             f" {GOALS['performance']:.2f}.", "",
-             "| Env | ABCO AER | goal (paper's ABCO) | AER verdict | ABCO P | P verdict |",
-             "|---|---|---|---|---|---|"]  # fmt: skip
+    """ABCO's goals per env; IUPE and ILPO against their published AER; the grid's wall time.
+
+    An env where a method has no run gets no row: one line names those envs (not decided).
+    """
+    rows, not_run = [], []
     for env in TABLE1_ENVS:
         ev = table_evaluation(env)
         aer, perf = grid.stats(env, "abco", ev, "aer"), grid.stats(env, "abco", ev, "performance")
         goal = GOALS["aer"][env]
         stopped = sum(r.env == env and r.method == "abco" for r in grid.stopped)
-        lines.append(f"| {env} | {ci_text(aer)} | {goal:.3f} | {_verdict(aer, goal, stopped)} |"
-                     f" {ci_text(perf)} | {_verdict(perf, GOALS['performance'], stopped)} (goal"
-                     f" {GOALS['performance']:.2f}) |")  # fmt: skip
-    lines += ["", "IUPE and ILPO: AER at or above their published AER on every environment"
-              " where one exists (GAIfO has none).", "",
-              "| Env | Method | AER mean [95% CI] | published AER | verdict |",
-              "|---|---|---|---|---|"]  # fmt: skip
+        if aer is None and perf is None and not stopped:
+            not_run.append(env)
+            continue
+        rows.append(f"| {env} | {ci_text(aer)} | {goal:.3f} | {_verdict(aer, goal, stopped)} |"
+                    f" {ci_text(perf)} | {_verdict(perf, GOALS['performance'], stopped)} (goal"
+                    f" {GOALS['performance']:.2f}) |")  # fmt: skip
+    lines = ["ABCO(α): AER at or above the paper's ABCO, P at or above"
+             f" {GOALS['performance']:.2f}.", "",
+             *_goal_table("| Env | ABCO AER | goal (paper's ABCO) | AER verdict | ABCO P |"
+                          " P verdict |", rows, {"ABCO(α)": not_run}),
+             "", "IUPE and ILPO: AER at or above their published AER on every environment"
+             " where one exists (GAIfO has none).", ""]  # fmt: skip
+    rows, missing_envs = [], {}
     for method in method_order(GOALS["published_aer"]):
         published = GOALS["published_aer"][method]
+        name = TABLE1_METHODS.get(method, method)
         for env in TABLE1_ENVS:
             if env not in published:
                 continue
             aer = grid.stats(env, method, table_evaluation(env), "aer")
             stopped = sum(r.env == env and r.method == method for r in grid.stopped)
-            lines.append(f"| {env} | {TABLE1_METHODS.get(method, method)} | {ci_text(aer)} |"
-                         f" {published[env]:.3f} | {_verdict(aer, published[env], stopped)} |")
+            if aer is None and not stopped:
+                missing_envs.setdefault(name, []).append(env)
+                continue
+            rows.append(f"| {env} | {name} | {ci_text(aer)} | {published[env]:.3f} |"
+                        f" {_verdict(aer, published[env], stopped)} |")  # fmt: skip
+    lines += _goal_table("| Env | Method | AER mean [95% CI] | published AER | verdict |", rows,
+                         missing_envs)  # fmt: skip
     seeds = grid.seeds or [0, 1, 2, 3, 4]  # as missing() counts them
     found = {(r.env, r.method, r.seed) for r in grid.done}
     without = sum(any((env, m, s) not in found for s in seeds)
@@ -174,6 +187,16 @@ def goals(grid: Grid, wall_s: float | None) -> list[str]:
         lines.append(f"\nGrid wall time {wall_s / 60:.1f} min against the goal of"
                      f" {goal / 3600:.0f} h for the seven-method grid: {verdict}.")  # fmt: skip
     return lines
+
+
+def _goal_table(head: str, rows: list[str], not_run: dict[str, list[str]]) -> list[str]:
+    """A goal table (none without rows), then one line per method naming the envs where it has
+    no run (its goal is not decided there)."""
+    lines = [head, "|" + "---|" * head.count(" |"), *rows] if rows else []
+    notes = [f"- {name}: no run on"
+             f" {'any environment' if len(envs) == len(TABLE1_ENVS) else ', '.join(envs)}"
+             " (not decided there)." for name, envs in not_run.items() if envs]  # fmt: skip
+    return lines + ([""] if lines and notes else []) + notes
 
 
 def _cells(n: int) -> str:
@@ -229,9 +252,10 @@ def missing(grid: Grid) -> list[str]:
     for r in grid.runs:
         if r.status == "ok":
             continue
-        state = (f"stopped, {r.status}" if r.final is not None
+        state = ("damaged final.json, skipped" if r.damaged is not None
+                 else f"stopped, {r.status}" if r.final is not None
                  else "failed" if r.row.get("status") == "failed" else "unfinished")  # fmt: skip
-        detail = (r.final or {}).get("message") or r.row.get("error") or ""
+        detail = escape((r.final or {}).get("message") or r.row.get("error") or "")
         why.setdefault((r.env, r.method, state), []).append((r.seed, detail))
     if why:
         lines += ["", "Runs without a result:"]
@@ -297,9 +321,11 @@ def all_runs(grid: Grid, csv_rows: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
-def wall(runs_dir: Path, grid: Grid) -> tuple[float | None, list[str]]:
-    """The grid's wall time (``bench_log.jsonl``: sessions that ran cells) and its lines."""
-    sessions = read_log(runs_dir)
+def wall(runs_dir: Path, grid: Grid, skipped: list[Skipped] | None = None
+         ) -> tuple[float | None, list[str]]:  # fmt: skip
+    """The grid's wall time (``bench_log.jsonl``: sessions that ran cells) and its lines; a
+    damaged line of the log goes to ``skipped`` (default: dropped)."""
+    sessions = read_log(runs_dir, [] if skipped is None else skipped)
     ran = [s for s in sessions if s.get("ran") or s.get("failed")]
     wall_s = float(sum(s["wall_s"] for s in ran)) if sessions else None
     cell_wall = sum(r.row.get("wall_s") or 0.0 for r in grid.done)
@@ -310,9 +336,10 @@ def wall(runs_dir: Path, grid: Grid) -> tuple[float | None, list[str]]:
     for s in ran:
         stopped = (", stopped before its end (its time up to its last finished cell)"
                    if s.get("finished") is False else "")  # fmt: skip
-        lines.append(f"  - {s.get('started')}: {s['wall_s']:.1f} s, backend {s.get('backend')},"
-                     f" jobs {s.get('jobs')}, threads {s.get('threads')}, ran {s.get('ran')},"
-                     f" skipped {s.get('skipped')}, failed {len(s.get('failed', []))}{stopped}")
+        lines.append(f"  - {escape(s.get('started'), 40)}: {s['wall_s']:.1f} s, backend"
+                     f" {escape(s.get('backend'), 40)}, jobs {s.get('jobs')}, threads"
+                     f" {s.get('threads')}, ran {s.get('ran')}, skipped {s.get('skipped')},"
+                     f" failed {len(s.get('failed') or [])}{stopped}")  # fmt: skip
     # Cells copied in from another run folder (their row names it: ``reused_from``) ran in
     # no session of this log; their own time, spread over the sessions' jobs, is added.
     reused = [r for r in grid.done if r.row.get("reused_from")]

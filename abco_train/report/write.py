@@ -23,11 +23,14 @@ Example:
 from __future__ import annotations
 
 import csv
-import json
+import io
+import os
 from pathlib import Path
 from typing import Any
 
-from abco_train.harness.run_folder import CONFIG
+from abco_data.files import check_target, remove_path, remove_stale_temporaries, temporary_name
+from abco_train.bench.records import RecordError, Skipped, check_config, escape, read_json
+from abco_train.harness.run_folder import CONFIG, write_atomic
 from abco_train.methods.base import INTERACTION_KINDS
 from abco_train.report import aggregates as aggregate
 from abco_train.report import generalisation, tables
@@ -51,6 +54,7 @@ from abco_train.report.runs import (
     method_order,
     table_evaluation,
 )  # fmt: skip
+from abco_train.report.summary import summary
 
 __all__ = [
     "TABLE1_ENVS", "TABLE1_METHODS", "TABLE2_METHODS", "TABLE2_ENV", "ORDER", "LABELS",
@@ -58,31 +62,40 @@ __all__ = [
     "table_evaluation", "method_order", "env_order", "ReportError",
 ]  # fmt: skip
 
+#: Most cells the grid found may span (envs × methods × seeds × numbers of layouts, the
+#: built-ins' included): the tables go through every one of them.
+MAX_SPAN = 10_000_000
+#: The name of the staging folders (``.report.{pid}-{hex}.staging.abco-tmp``) in ``--out``.
+STAGING = "report"
+
 #: A plot of the report: its name in the returned files, its file (``None``: nothing to
 #: plot) and its caption.
 Plot = tuple[str, "Path | None", str]
 
 
-def _settings(runs: list[Run]) -> str:
-    """The regime and preset of the grid's runs (from their config.json)."""
+def _settings(runs: list[Run], skipped: list[Skipped]) -> str:
+    """The regime and preset of the grid's runs (from their config.json, each checked)."""
     seen: set[tuple[str, str]] = set()
     for r in runs:
-        path = r.path / CONFIG
-        if path.exists():
-            cfg = json.loads(path.read_text())
-            seen.add((str(cfg.get("regime", "default")), str(cfg.get("preset", "cpu"))))
+        try:
+            cfg = check_config(read_json(r.path / CONFIG))
+        except FileNotFoundError:
+            continue
+        except RecordError as exc:
+            skipped.append(Skipped(f"{r.where}/{CONFIG}", str(exc)))
+            continue
+        seen.add((str(cfg.get("regime", "default")), str(cfg.get("preset", "cpu"))))
     return "; ".join(f"regime {g}, preset {p}" for g, p in sorted(seen)) or "unknown"
 
 
-def _intro(runs_dir: Path, grid: Grid) -> list[str]:
+def _intro(grid: Grid, skipped: list[Skipped]) -> list[str]:
     kinds = ", ".join(k.replace("_", "-") for k in INTERACTION_KINDS)
     return [
-        f"# IfO benchmark: {runs_dir}", "",
         f"{len(grid.done)} finished runs of {len(grid.methods)} method(s), seeds"
         f" {', '.join(map(str, grid.seeds)) or 'none'}; {len(grid.stopped)} run(s) stopped by"
         " their method's health check (e.g. an IDM at chance: no result, counted as '+k"
         " stopped' beside the seeds and summarised under Missing).",
-        f"Settings: {_settings(grid.runs)}.",
+        f"Settings: {_settings(grid.runs, skipped)}.",
         "P and AER: mean over seeds with a 95% bootstrap CI, and the IQM. Classic control:",
         "the final evaluation's episodes (unseen seeds); mazes: every layout of the split,",
         "the paper's protocol (4th visit to a cell ends the episode with return -1).",
@@ -113,30 +126,55 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
         The written files by name (``report``, ``csv``, and the plots that had data:
         ``performance``, ``labels``, ``profile``, ``generalisation``).
 
+    Every file is first written into a hidden staging folder in ``out``, then moved into
+    place once all were written: a report that fails (a full or read-only disk) leaves the
+    previous one as it was, with no file half-written.
+
     Raises:
         ReportError: ``runs_dir`` is not a folder, holds no run folders, or has no method
-            ``baseline``.
+            ``baseline``; ``out`` is not a folder.
+        InvalidTargetError: A file of the report is there as something else than a regular
+            file (a folder, a device, a link): it is never replaced.
+        OSError: A write failed (a full or read-only disk); nothing was replaced.
     """
     runs_dir = Path(runs_dir)
-    runs = _runs(runs_dir)
+    skipped: list[Skipped] = []
+    runs = _runs(runs_dir, skipped)
+    baseline = _baseline(baseline, Grid(runs), runs_dir)
+    found = sorted({r.env for r in runs}, key=env_order)
+    if labels_env not in found and labels_env not in TABLE1_ENVS:
+        raise ReportError(f"unknown --labels-env {escape(labels_env, 80)!r}: not an env of"
+                          f" {escape(runs_dir)}; envs found: {', '.join(found)}")  # fmt: skip
+    out = _out_folder(runs_dir, out)
+    stage = temporary_name(out / STAGING, "staging")  # every file first here, then moved
+    stage.mkdir()
+    try:
+        md, csv_rows, files = _compose(runs_dir, runs, skipped, stage, labels_env, baseline)
+        _write(stage, md, csv_rows, files)
+        return _publish(stage, out, files)
+    finally:
+        remove_path(stage)
+
+
+def _compose(runs_dir: Path, runs: list[Run], skipped: list[Skipped], out: Path,
+             labels_env: str, baseline: str
+             ) -> tuple[list[str], list[dict[str, Any]], dict[str, Path]]:  # fmt: skip
+    """The report's Markdown lines, its CSV rows, and its plots (drawn into ``out``)."""
     grid = Grid([r for r in runs if r.layouts is None])  # the paper's tables: standard data
     every = Grid(runs)
-    baseline = _baseline(baseline, every, runs_dir)
-    out = Path(out) if out is not None else runs_dir / "report"
-    out.mkdir(parents=True, exist_ok=True)
     csv_rows: list[dict[str, Any]] = []
-    wall, wall_lines = tables.wall(runs_dir, every)
+    wall, wall_lines = tables.wall(runs_dir, every, skipped)
     label = {m: LABELS.get(m, m) for m in every.methods + grid.main_methods}
     gen_lines, gen_png = generalisation.section(runs, csv_rows, out, label)
     plots: list[Plot] = [("generalisation", gen_png, generalisation.CAPTION)]
     profile_png = None
     if not grid.runs:  # procedural-data runs only: the generalisation section
-        md = [*_intro(runs_dir, every), "", "## Generalisation", "", *gen_lines]
+        md = [*_intro(every, skipped), "", "## Generalisation", "", *gen_lines]
     else:
         agg_lines, agg_rows, profile_png = aggregate.section(
             grid.scores(grid.main_methods, TABLE1_ENVS), TABLE1_ENVS, baseline, out, label,
             evaluation="train/paper (mazes), episodes")  # fmt: skip
-        md = [*_intro(runs_dir, grid),
+        md = [*_intro(grid, skipped),
               *_paper_sections(grid, wall, agg_lines, gen_lines, label, csv_rows)]
         csv_rows += agg_rows  # the aggregates' rows last
         plots[:0] = _paper_plots(grid, out, labels_env)
@@ -145,21 +183,63 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
     _plots(md, files, plots)
     if profile_png is not None:
         files["profile"] = profile_png
-    return _write(out, md, csv_rows, files)
+    # last, once every record the report reads has been read: what ran, and what was skipped
+    md[:0] = [f"# IfO benchmark: {escape(runs_dir)}", "", "## Summary", "",
+              *summary(runs, skipped), ""]  # fmt: skip
+    return md, csv_rows, files
 
 
-def _runs(runs_dir: Path) -> list[Run]:
-    """The runs of ``runs_dir``.
+def _out_folder(runs_dir: Path, out: str | Path | None) -> Path:
+    """The report's folder (made if needed), its previous files checked: each one the report
+    replaces must be a regular file.
+
+    Raises:
+        ReportError: ``out`` is not a folder.
+        InvalidTargetError: A file the report writes is there as something else (a folder,
+            a device, a link).
+    """
+    out = Path(out) if out is not None else runs_dir / "report"
+    if out.exists() and not out.is_dir():
+        raise ReportError(f"--out {escape(out)} is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(out, STAGING)  # the staging folders of killed reports
+    for name in ("report.md", "results.csv"):
+        check_target(out / name)
+    return out
+
+
+def _publish(stage: Path, out: Path, files: dict[str, Path]) -> dict[str, Path]:
+    """Move every file of ``stage`` into ``out`` (once all were written: a report that fails
+    leaves the previous one as it was); the files by name, in ``out``."""
+    names = sorted(p.name for p in stage.iterdir())
+    for name in names:
+        check_target(out / name)
+    for name in names:
+        os.replace(stage / name, out / name)
+    return {key: out / path.name for key, path in files.items()}
+
+
+def _runs(runs_dir: Path, skipped: list[Skipped]) -> list[Run]:
+    """The runs of ``runs_dir`` (the records skipped go to ``skipped``).
 
     Raises:
         ReportError: ``runs_dir`` is not a folder or holds no run folders.
     """
     if not runs_dir.is_dir():
-        raise ReportError(f"no such folder {runs_dir}")
-    runs = load_runs(runs_dir)
+        raise ReportError(f"no such folder {escape(runs_dir)}")
+    runs = load_runs(runs_dir, skipped)
+    envs, methods = {r.env for r in runs} | set(TABLE1_ENVS), {r.method for r in runs} | set(ORDER)
+    sizes = (len(envs), len(methods), len({r.seed for r in runs}), len({r.layouts for r in runs}))
+    if sizes[0] * sizes[1] * sizes[2] * sizes[3] > MAX_SPAN:
+        raise ReportError(f"{escape(runs_dir)}: its {len(runs):,} run folders span more cells than"
+                          f" a report covers ({MAX_SPAN:,}): {sizes[0]:,} envs × {sizes[1]:,}"
+                          f" methods × {sizes[2]:,} seeds × {sizes[3]:,} numbers of layouts;"
+                          " report on one grid at a time")  # fmt: skip
     if not runs:
-        raise ReportError(f"{runs_dir} holds no run folders ({{env}}/{{method}}/seed{{n}}); "
-                          "is it an `abco bench --out` folder?")  # fmt: skip
+        why = f" ({len(skipped)} skipped, the first: {skipped[0]})" if skipped else ""
+        raise ReportError(f"{escape(runs_dir)} holds no run folders"
+                          f" ({{env}}/{{method}}/seed{{n}}){why}; is it an `abco bench --out`"
+                          " folder?")  # fmt: skip
     return runs
 
 
@@ -224,7 +304,7 @@ def _paper_plots(grid: Grid, out: Path, labels_env: str) -> list[Plot]:
                                           out / "idm_label_distribution.png")  # fmt: skip
     return [
         ("performance", perf_png, "P per iteration (band: min..max across seeds)"),
-        ("labels", labels_png, f"IDM label distribution, BCO(α) vs ABCO on {labels_env}"),
+        ("labels", labels_png, f"IDM label distribution, BCO(α) vs ABCO on {escape(labels_env)}"),
     ]  # fmt: skip
 
 
@@ -239,13 +319,13 @@ def _plots(md: list[str], files: dict[str, Path], plots: list[Plot]) -> None:
 
 
 def _write(out: Path, md: list[str], csv_rows: list[dict[str, Any]],
-           files: dict[str, Path]) -> dict[str, Path]:  # fmt: skip
-    """Write ``report.md`` and ``results.csv``; return every file by name."""
-    files["report"] = out / "report.md"
-    files["report"].write_text("\n".join(md) + "\n")
-    files["csv"] = out / "results.csv"
-    with files["csv"].open("w", newline="") as f:
-        writer: csv.DictWriter[str] = csv.DictWriter(f, fieldnames=CSV_FIELDS)
-        writer.writeheader()
-        writer.writerows(csv_rows)
-    return files
+           files: dict[str, Path]) -> None:  # fmt: skip
+    """Write ``report.md`` and ``results.csv`` into ``out``; add them to ``files``."""
+    table = io.StringIO(newline="")
+    writer: csv.DictWriter[str] = csv.DictWriter(table, fieldnames=CSV_FIELDS)
+    writer.writeheader()
+    writer.writerows({k: escape(v, 10**6) if isinstance(v, str) else v for k, v in r.items()}
+                     for r in csv_rows)  # fmt: skip
+    files["report"] = write_atomic(out / "report.md", "\n".join(md) + "\n")
+    files["csv"] = write_atomic(out / "results.csv", lambda p: p.write_bytes(
+        table.getvalue().encode("utf-8")))  # fmt: skip

@@ -87,7 +87,7 @@ class NearestNeighbourIfO(Method):
         return self.labels
 
     def state_dict(self) -> dict[str, Any]:
-        """All that a resumed run needs."""
+        """All that a resumed run needs, as data (a numpy array here; no other objects)."""
         return {"labels": self.labels}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:

@@ -13,7 +13,9 @@ speaks what ``huggingface_hub`` needs to download and to commit files:
   ``POST /api/{type}s/{repo}/commit/{revision}`` (NDJSON with base64 ``file`` lines).
 
 Every request is recorded in :attr:`HubServer.requests`; faults can be armed with
-:meth:`HubServer.interrupt` (send part of a body, then drop the connection).
+:meth:`HubServer.interrupt` (send part of a body, then drop the connection),
+:meth:`HubServer.stall` (accept and never answer, or drip the answer a byte at a time) and
+:meth:`HubServer.announce_size` (claim another size for a file).
 
 Example:
     >>> with HubServer() as hub:
@@ -30,6 +32,7 @@ import hashlib
 import json
 import socket
 import threading
+import time
 from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
@@ -69,6 +72,13 @@ class _Fault:
     times: int | None
 
 
+@dataclass
+class _Stall:
+    path: str
+    method: str
+    drip: float | None  # None: never answer
+
+
 class HubServer:
     """A Hub stand-in on 127.0.0.1; use as a context manager or call start/stop."""
 
@@ -76,6 +86,9 @@ class HubServer:
         self.requests: list[Recorded] = []
         self._repos: dict[tuple[str, str], _Repo] = {}
         self._faults: list[_Fault] = []
+        self._stalls: list[_Stall] = []
+        self._sizes: dict[str, int] = {}
+        self._release = threading.Event()  # set: stalled answers give up
         self._lock = threading.Lock()
         self._server: ThreadingHTTPServer | None = None
         self._thread: threading.Thread | None = None
@@ -102,7 +115,8 @@ class HubServer:
         return self
 
     def stop(self) -> None:
-        """Stop serving and close the socket."""
+        """Stop serving and close the socket (stalled answers give up)."""
+        self._release.set()
         if self._server is not None:
             self._server.shutdown()
             self._server.server_close()
@@ -153,10 +167,26 @@ class HubServer:
         with self._lock:
             self._faults.append(_Fault(path=path, after=after, times=times))
 
+    def stall(self, path: str, *, method: str = "GET", drip: float | None = None) -> None:
+        """Make every ``method`` request of a file stall: never answer (``drip=None``), or
+        send the headers and then one byte of the body every ``drip`` seconds; until
+        :meth:`clear_faults` or :meth:`stop`."""
+        with self._lock:
+            self._release.clear()
+            self._stalls.append(_Stall(path=path, method=method, drip=drip))
+
+    def announce_size(self, path: str, size: int) -> None:
+        """Claim ``size`` bytes for a file in its ``X-Linked-Size`` header (the body stays)."""
+        with self._lock:
+            self._sizes[path] = size
+
     def clear_faults(self) -> None:
         """Disarm every fault."""
         with self._lock:
             self._faults.clear()
+            self._stalls.clear()
+            self._sizes.clear()
+        self._release.set()
 
     def reset_requests(self) -> None:
         """Forget the recorded requests."""
@@ -184,6 +214,10 @@ class HubServer:
         repo.refs[branch] = commit
         repo.messages[commit] = message
         return commit
+
+    def _stall_of(self, path: str, method: str) -> _Stall | None:
+        with self._lock:
+            return next((x for x in self._stalls if x.path == path and x.method == method), None)
 
     def _take_fault(self, path: str) -> _Fault | None:
         with self._lock:
@@ -281,11 +315,13 @@ class _Handler(BaseHTTPRequestHandler):
             self._error(404, "EntryNotFound", f"{filename} does not exist", commit)
             return
         etag = hashlib.sha256(data).hexdigest()
+        with self.hub._lock:
+            announced = self.hub._sizes.get(filename, len(data))
         headers = {
             "X-Repo-Commit": commit,
             "ETag": f'"{etag}"',
             "X-Linked-Etag": f'"{etag}"',
-            "X-Linked-Size": str(len(data)),
+            "X-Linked-Size": str(announced),
             "Accept-Ranges": "bytes",
             "Content-Type": "application/octet-stream",
         }
@@ -300,6 +336,10 @@ class _Handler(BaseHTTPRequestHandler):
                 return
             headers["Content-Range"] = f"bytes {start}-{end}/{len(data)}"
             data, status = data[start : end + 1], 206
+        stall = self.hub._stall_of(filename, self.command)
+        if stall is not None:
+            self._stalled(stall, status, data, headers)
+            return
         fault = self.hub._take_fault(filename) if self.command == "GET" else None
         if fault is None:
             self._send(status, data, headers)
@@ -312,6 +352,28 @@ class _Handler(BaseHTTPRequestHandler):
         self.end_headers()
         self.wfile.write(data[: fault.after])
         self.wfile.flush()
+        self.close_connection = True
+        with contextlib.suppress(OSError):
+            self.connection.shutdown(socket.SHUT_RDWR)
+
+    def _stalled(self, stall: _Stall, status: int, data: bytes, headers: dict[str, str]) -> None:
+        """Never answer, or drip the answer; give up when the server releases stalls."""
+        release = self.hub._release
+        if stall.drip is None:
+            release.wait()
+        else:
+            self.send_response(status)
+            for key, value in headers.items():
+                self.send_header(key, value)
+            self.send_header("Content-Length", str(len(data)))
+            self.end_headers()
+            with contextlib.suppress(OSError):
+                for i in range(len(data)):
+                    if release.is_set():
+                        break
+                    self.wfile.write(data[i : i + 1])
+                    self.wfile.flush()
+                    time.sleep(stall.drip)
         self.close_connection = True
         with contextlib.suppress(OSError):
             self.connection.shutdown(socket.SHUT_RDWR)

@@ -165,12 +165,13 @@ def test_a_zeroed_heap_block_ends_in_an_error_not_a_hang(small: Path) -> None:
 
 def test_torch_view_names_the_file_of_a_damaged_chunk(small: Path) -> None:
     torch = pytest.importorskip("torch")
-    view = abco_data.open_dataset(small).torch_dataset()
     with h5py.File(small) as f:
         info = f["observations"].id.get_chunk_info(0)
     with open(small, "r+b") as fh:
         fh.seek(info.byte_offset + 10)
         fh.write(b"\xff" * 64)
+    # Opened after the damage (a file changed after opening is refused as changed, not read).
+    view = abco_data.open_dataset(small).torch_dataset()
     loader = torch.utils.data.DataLoader(view, batch_size=8)
     with pytest.raises(CorruptDatasetError, match="observations cannot be read") as err:
         list(loader)

@@ -18,9 +18,11 @@ import json
 import logging
 import os
 import socket
+import stat
 import subprocess
 import sys
 import textwrap
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,12 +31,16 @@ import pytest
 from hub_server import HubServer
 
 import abco_data
-from abco_data import hub, publish
+from abco_data import cli, hub, progress, publish
 from abco_data.errors import (
     ChecksumError,
+    DatasetError,
     DatasetNotAvailableError,
+    InvalidParameterError,
+    InvalidTargetError,
     UnknownDatasetError,
 )
+from abco_data.progress import LogProgress
 
 REPO = "abco-datasets/abco"
 DATASET = "abco/maze3x3-expert-v0"
@@ -230,7 +236,12 @@ def test_progress_false_passes_huggingface_hubs_silent_bar(
     hub.download(DATASET, progress=False)
     assert seen == [silent_tqdm]  # huggingface_hub's own do-nothing bar
     hub.download(DATASET, cache_dir=hub_env.abco_cache / "other", progress=True)
-    assert seen[-1] is None  # huggingface_hub's own bars, as it configures them
+    # Not a terminal here (pytest captures stderr): whole lines for a log; on a terminal,
+    # None: huggingface_hub's own bars, as it configures them.
+    assert seen[-1] is LogProgress
+    monkeypatch.setattr(progress, "is_terminal", lambda stream: True)
+    hub.download(DATASET, cache_dir=hub_env.abco_cache / "third", progress=True)
+    assert seen[-1] is None
 
 
 def test_interrupted_download_resumes_and_ends_verified(hub_env: HubEnv) -> None:
@@ -613,3 +624,132 @@ def test_load_end_to_end_with_the_real_generator(
     regenerated = hub.load(dataset_id, offline=True, progress=False)
     assert Path(regenerated.path).read_bytes() == data
     assert hub_env.server.requests == []
+
+
+# --------------------------------------------------------------------------- bounded Hub calls
+
+
+def _abco_hub_workers() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name == "abco-hub-call"]
+
+
+def _hub_warnings(caplog: pytest.LogCaptureFixture) -> list[str]:
+    return [r.getMessage() for r in caplog.records if r.name.startswith("huggingface_hub")
+            and r.levelno >= logging.WARNING]
+
+
+@pytest.mark.parametrize("method", ["HEAD", "GET"])
+def test_hub_that_never_answers_falls_back_to_generation(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture,
+    method: str,
+) -> None:
+    monkeypatch.setenv("ABCO_HUB_TIMEOUT", "0.5")
+    hub_env.server.stall(FILENAME, method=method)
+    with pytest.raises(DatasetNotAvailableError, match="no complete answer within 0.5 s") as err:
+        hub.download(DATASET, progress=False)
+    assert "ABCO_HUB_TIMEOUT" in str(err.value) and FILENAME in str(err.value)
+    monkeypatch.setattr(hub, "generate", fake_generator(hub_env.data))
+    with caplog.at_level(logging.WARNING):
+        assert hub.fetch(DATASET, progress=False).read_bytes() == hub_env.data
+    assert _hub_warnings(caplog) == []  # huggingface_hub's retries stay quiet
+    assert [r.getMessage() for r in caplog.records if r.name == "abco_data.hub"] == [
+        f"{err.value}; generating {DATASET} locally instead"]
+
+
+def test_hub_that_drips_falls_back_and_stops_downloading(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("ABCO_HUB_TIMEOUT", "0.5")
+    hub_env.server.stall(FILENAME, method="GET", drip=0.01)  # 300 kB: hours at this pace
+    monkeypatch.setattr(hub, "generate", fake_generator(hub_env.data))
+    assert hub.fetch(DATASET, progress=False).read_bytes() == hub_env.data
+    gets = [r for r in hub_env.file_requests() if r.startswith("GET")]
+    assert gets  # the download had started, and was dripping
+    # The abandoned worker stops at its next chunk: nothing keeps downloading in the
+    # background (the join's bound is generous; the worker stops a chunk after the limit).
+    for worker in _abco_hub_workers():
+        worker.join(timeout=30)
+        assert not worker.is_alive()
+
+
+def test_hub_announcing_a_huge_file_falls_back_before_any_download(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    hub_env.server.announce_size(FILENAME, 10**12)
+    with pytest.raises(DatasetNotAvailableError, match="announces 1000000000000 bytes"):
+        hub.download(DATASET, progress=False)
+    monkeypatch.setattr(hub, "generate", fake_generator(hub_env.data))
+    assert hub.fetch(DATASET, progress=False).read_bytes() == hub_env.data
+    assert not [r for r in hub_env.file_requests() if r.startswith("GET")]
+
+
+def test_huggingface_hubs_too_large_error_is_a_hub_failure(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def too_large(*args: Any, **kwargs: Any) -> Any:
+        raise ValueError("The file is too large to be downloaded using the regular download"
+                         " method.")
+
+    monkeypatch.setattr(hub, "hf_hub_download", too_large)
+    with pytest.raises(DatasetNotAvailableError, match="ValueError: The file is too large"):
+        hub.download(DATASET, progress=False)
+    monkeypatch.setattr(hub, "generate", fake_generator(hub_env.data))
+    assert hub.fetch(DATASET, progress=False).read_bytes() == hub_env.data
+
+
+@pytest.mark.parametrize("value", ["abc", "0", "-1", "nan", "1e9"])
+def test_bad_hub_timeout_is_one_clear_error(
+    hub_env: HubEnv, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+    value: str,
+) -> None:
+    monkeypatch.setenv("ABCO_HUB_TIMEOUT", value)
+    with pytest.raises(InvalidParameterError, match=f"ABCO_HUB_TIMEOUT must be .* got '{value}'"):
+        hub.fetch(DATASET, progress=False)
+    assert cli.main(["download", DATASET, "--quiet"]) == cli.EXIT_BAD_INPUT
+    assert capsys.readouterr().err.startswith("error: ABCO_HUB_TIMEOUT must be")
+    assert hub_env.server.requests == []
+
+
+def test_hub_retry_noise_folds_into_one_error_line(
+    hub_env: HubEnv, capfd: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
+) -> None:
+    hub_env.server.interrupt(FILENAME, after=0, times=None)  # every GET dies: retries
+    with caplog.at_level(logging.WARNING):
+        assert cli.main(["download", DATASET, "--quiet"]) == cli.EXIT_FAILED
+    gets = [r for r in hub_env.file_requests() if r.startswith("GET")]
+    assert len(gets) > 2  # huggingface_hub did retry ...
+    assert _hub_warnings(caplog) == []  # ... without a word
+    err = capfd.readouterr().err
+    assert err.startswith("error: could not get") and err.count("\n") == 1, err
+    assert logging.getLogger("huggingface_hub").level != logging.ERROR  # restored after
+
+
+@pytest.mark.parametrize("repo", ["../../x", "a/b/c", "name-only", "owner/x..y", ""])
+def test_push_refuses_a_bad_repo_id_before_any_request(
+    hub_env: HubEnv, tmp_path: Path, capsys: pytest.CaptureFixture[str], repo: str
+) -> None:
+    path = _tiny_hdf5(tmp_path / "a.hdf5", DATASET, "AbcoMaze3x3-v0")
+    with pytest.raises(InvalidParameterError, match="invalid Hub repo id"):
+        publish.push(DATASET, repo, path=path, token="hf_test")
+    assert cli.main(["push", DATASET, "--repo", repo, "--path", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: invalid Hub repo id {repo!r}") and err.count("\n") == 1
+    assert hub_env.server.requests == []
+
+
+def test_manifest_with_a_bad_repo_id_is_a_clear_error(hub_env: HubEnv) -> None:
+    hub_env.write_manifest(repo_id="../../x")
+    with pytest.raises(DatasetError, match="invalid dataset manifest .*'repo_id'"):
+        hub.fetch(DATASET, progress=False)
+
+
+def test_fifo_in_the_cache_is_never_read_or_replaced(hub_env: HubEnv) -> None:
+    hub_env.abco_cache.mkdir(parents=True)
+    fifo = hub_env.abco_cache / FILENAME
+    os.mkfifo(fifo)
+    with pytest.raises(InvalidTargetError, match="FIFO"):  # not a hang on the FIFO
+        hub.fetch(DATASET, progress=False)
+    with pytest.raises(InvalidTargetError, match="FIFO"):
+        hub.download(DATASET, progress=False)
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    assert hub_env.file_requests() == [] and hub_env.abco_files() == [FILENAME]

@@ -173,6 +173,9 @@ def test_image_size_pairs_of_numpy_integers_work(env_id):
         ({"render_mode": "ansi"}, "unknown render_mode 'ansi'"),
         ({"size": 2.5}, "size=2.5 (float)"),
         ({"size": 1}, "size=1 (int)"),
+        ({"size": 10**6}, "size from 2 to 64 cells, got size=1000000"),
+        ({"image_size": (50_000, 50_000)}, "at most 4096 pixels a side"),
+        ({"image_size": 4097}, "image_size 4097 is too large"),
     ],
 )
 def test_bad_constructor_arguments_are_refused(kwargs, match):
@@ -184,13 +187,34 @@ def test_bad_constructor_arguments_are_refused(kwargs, match):
 
 @pytest.mark.parametrize(
     ("kwargs", "match"),
-    [({"num_envs": 0}, "num_envs must be an integer of at least 1, got 0"),
+    [({"num_envs": 0}, "num_envs must be an integer from 1 to 65536, got 0"),
      ({"num_envs": 2.0}, "got 2.0"),
+     ({"num_envs": 10**6}, "from 1 to 65536, got 1000000"),
+     ({"num_envs": 1000, "image_size": 4096}, "would take about 187.5 GiB (at most 16 GiB): use"
+                                              " at most 85 of them"),
      ({"max_episode_steps": 0}, "max_episode_steps must be None or an integer of at least 1")],
 )
 def test_bad_vector_arguments_are_refused(kwargs, match):
     with pytest.raises(InvalidOptionError, match=re.escape(match)):
         abco_envs.MazeVectorEnv(**{"num_envs": 2, **kwargs})
+
+
+def test_bounds_are_refused_before_anything_is_allocated(monkeypatch):
+    """Through gym's own constructors too; nothing of the refused size is ever built."""
+    import gymnasium as gym
+
+    from abco_envs.maze import vector
+
+    def no_batch(*args, **kwargs):
+        raise AssertionError("the refused env allocated its observation batch")
+
+    monkeypatch.setattr(vector, "batch_space", no_batch)
+    with pytest.raises(InvalidOptionError, match="num_envs must be an integer from 1 to 65536"):
+        gym.make_vec("AbcoMaze5x5-v0", num_envs=10**6)
+    with pytest.raises(InvalidOptionError, match="at most 4096 pixels a side"):
+        gym.make("AbcoMaze5x5-v0", image_size=(50_000, 50_000))
+    with pytest.raises(InvalidOptionError, match="at most 4096 pixels a side"):
+        gym.make_vec("AbcoMaze5x5-v0", num_envs=2, image_size=(50_000, 50_000))
 
 
 @pytest.mark.parametrize("helper", [maze_size, expert_policy, controller_for])

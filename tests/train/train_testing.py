@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import abco_data
 import abco_envs
 from abco_train.config.run import RunConfig
@@ -45,3 +47,20 @@ def tiny_config(env_id, method, data, run_dir, **changes) -> RunConfig:
     )
     values.update(changes)
     return config_from_record(values)  # BCO options may be given as keywords
+
+
+def one_error_line(err: str, *needles: str) -> None:
+    """``err`` is one ``error:`` line holding every needle."""
+    assert err.startswith("error: ") and err.count("\n") == 1, err
+    for needle in needles:
+        assert needle in err, err
+
+
+def train_argv(cfg: Any, **changes: Any) -> list[str]:
+    """``abco train`` of ``cfg`` (a tiny config) with ``changes`` to its options."""
+    values = {"env": cfg.env, "method": cfg.method, "seed": cfg.seed, "run-dir": cfg.run_dir,
+              "expert-data": cfg.expert_data, "pre-data": cfg.pre_data, "iterations": 1,
+              "idm-epochs": 1, "policy-epochs": 1, "first-epochs-factor": 1, "eval-layouts": 2,
+              "eval-episodes": 2, "plot-layouts": 2, "eval-max-steps": 30, **changes}
+    return ["train", "--quiet", "--no-plots",
+            *[x for k, v in values.items() for x in (f"--{k}", str(v))]]

@@ -374,7 +374,8 @@ class BCOFamily(Method):
         return self.labels
 
     def state_dict(self) -> dict[str, Any]:
-        """Everything needed to resume: nets, optimisers, I_pos, I_s, labels, rng."""
+        """Everything needed to resume: nets, optimisers, I_pos, I_s, labels, rng (data:
+        tensors, numpy arrays, the generator's state of ints)."""
         return {
             "policy": self.policy.state_dict(), "idm": self.idm.state_dict(),
             "policy_opt": self.policy_opt.state_dict(), "idm_opt": self.idm_opt.state_dict(),
@@ -385,7 +386,17 @@ class BCOFamily(Method):
         }  # fmt: skip
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore :meth:`state_dict`."""
+        """Restore :meth:`state_dict`.
+
+        Raises:
+            TypeError: A kept set that is not the array :meth:`state_dict` stores there.
+        """
+        kinds = {"pos_obs": torch.Tensor, "pos_t": torch.Tensor, "pos_actions": torch.Tensor,
+                 "pos_runs": np.ndarray, "pos_wins": np.ndarray, "s_pre": torch.Tensor,
+                 "s_pos": torch.Tensor, "labels": (np.ndarray, type(None))}  # fmt: skip
+        wrong = [key for key, kind in kinds.items() if not isinstance(state[key], kind)]
+        if wrong:
+            raise TypeError(f"not the arrays a state of {type(self).__name__} keeps: {wrong}")
         self.policy.load_state_dict(state["policy"])
         self.idm.load_state_dict(state["idm"])
         self.policy_opt.load_state_dict(state["policy_opt"])

@@ -3,6 +3,7 @@ batched predictions, the transposed-maze augmentation and the IDM's fixed held-o
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 import numpy as np
@@ -65,11 +66,15 @@ def fit(
     minibatch; ``max_batches``: stop after that many updates. Mean loss of the last epoch."""
     from tqdm.auto import tqdm
 
+    from abco_data.progress import is_terminal
+
     net.train()
     n, loss_sum, seen = len(labels), 0.0, 0
     batches = -(-n // batch_size)
     total = epochs * batches if max_batches is None else min(epochs * batches, max_batches)
-    bar = tqdm(total=total, desc=desc, leave=False, disable=quiet, unit="batch")
+    # minibatch bars only on a terminal: in a log they would repeat for every epoch
+    bar = tqdm(total=total, desc=desc, leave=False, disable=quiet or not is_terminal(sys.stderr),
+               unit="batch")  # fmt: skip
     done = 0  # not bar.n: a disabled bar counts nothing
     for _ in range(epochs):
         order = torch.from_numpy(rng.permutation(n))

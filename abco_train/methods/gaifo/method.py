@@ -324,8 +324,8 @@ class GAIfO(Method):
         return np.asarray(actions, dtype=np.int64).reshape(-1)
 
     def state_dict(self) -> dict[str, Any]:
-        """PPO's networks and optimiser, D and its optimiser, the rng. (PPO's step count is
-        not needed: every iteration restarts it, :meth:`train_iteration`.)"""
+        """PPO's networks and optimiser, D and its optimiser, the rng: data, tensors and ints.
+        (PPO's step count is not needed: every iteration restarts it, :meth:`train_iteration`.)"""
         return {
             "policy": self.model.policy.state_dict(),
             "policy_opt": self.model.policy.optimizer.state_dict(),

@@ -378,13 +378,20 @@ class ILPO(Method):
         return self.labels
 
     def state_dict(self) -> dict[str, Any]:
-        """Networks, optimisers, the remapping steps kept so far, the generator's state."""
+        """Networks, optimisers, the remapping steps kept so far, the generator's state (data:
+        tensors, numpy arrays, ints)."""
         return {"net": self.net.state_dict(), "opt": self.opt.state_dict(),
                 **self.remapping.state_dict(), "labels": self.labels,
                 "rng": self.rng.bit_generator.state}  # fmt: skip
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
-        """Restore :meth:`state_dict`."""
+        """Restore :meth:`state_dict`.
+
+        Raises:
+            TypeError: Labels or remapping steps that are not the arrays it stores.
+        """
+        if not isinstance(state["labels"], np.ndarray):
+            raise TypeError(f"labels are a {type(state['labels']).__name__}, not an array")
         self.net.load_state_dict(state["net"])
         self.opt.load_state_dict(state["opt"])
         self.remapping.load_state_dict(state)

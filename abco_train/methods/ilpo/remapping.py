@@ -177,7 +177,17 @@ class ActionRemapping:
         }  # fmt: skip
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
-        """Restore :meth:`state_dict` (other keys of ``state`` are ignored)."""
+        """Restore :meth:`state_dict` (other keys of ``state`` are ignored).
+
+        Raises:
+            TypeError: Kept steps, counts or rounds that are not what it stores.
+        """
+        steps = [state[k] for k in ("remap_obs", "remap_z", "remap_actions")]
+        counts = state["remap_counts"]
+        if not (all(isinstance(x, torch.Tensor) for x in steps)
+                and isinstance(counts, np.ndarray) and counts.shape == self.counts.shape
+                and counts.dtype == self.counts.dtype and type(state["remap_phases"]) is int):
+            raise TypeError("remapping steps, counts or rounds that are not ILPO's")
         self.remap_net.load_state_dict(state["remap_net"])
         self.remap_opt.load_state_dict(state["remap_opt"])
         self.obs, self.z = state["remap_obs"], state["remap_z"]
