@@ -272,10 +272,11 @@ class Ctx:
 # -- judges ---------------------------------------------------------------------------------
 
 
-def refused(res: Result, *, mention: str | None = None, codes: Sequence[int] = (1, 2)
-            ) -> Outcome:  # fmt: skip
+def refused(res: Result, *, mention: str | tuple[str, ...] | None = None,
+            codes: Sequence[int] = (1, 2)) -> Outcome:  # fmt: skip
     """Bad input (or a failed operation) told in one line: exit 1 or 2, exactly one
-    ``error: ...`` line on stderr (the last), nothing that looks like a traceback."""
+    ``error: ...`` line on stderr (the last), nothing that looks like a traceback; where
+    ``mention`` is given, the line holds it (or one of them)."""
     if res.timed_out:
         return fail("hang", f"still running after {res.timeout:.0f} s")
     if TRACEBACK.search(res.err):
@@ -291,8 +292,10 @@ def refused(res: Result, *, mention: str | None = None, codes: Sequence[int] = (
                     f"{telling_line(res.err) or '(no stderr)'}")  # fmt: skip
     if lines[-1] != errors[0]:
         return fail("traceback", f"exit {res.rc}, the error line is not the last: {lines[-1]}")
-    if mention is not None and mention not in errors[0]:
-        return fail("traceback", f"the error line does not name {mention}: {errors[0][:200]}")
+    words = (mention,) if isinstance(mention, str) else mention or ()
+    if words and not any(w in errors[0] for w in words):
+        return fail("traceback", f"the error line does not name {' or '.join(words)}: "
+                    f"{errors[0][:200]}")  # fmt: skip
     return ok(errors[0][:200])
 
 

@@ -112,7 +112,7 @@ def build_hub(ctx: Ctx) -> dict[str, Any]:
     folder = ctx.root / "fixtures" / "hub"
     folder.mkdir(parents=True, exist_ok=True)
     ds_id = "abco/maze3x3-expert-v0"
-    shipped = json.loads(Path(_shipped_manifest()).read_text())
+    shipped = json.loads((ctx.code / "abco_data" / "manifest.json").read_text())
     entry = shipped["files"][ds_id]
     data_path = folder / entry["filename"]
     _check(ctx.abco("data", "generate", ds_id, "--out", str(data_path), "--quiet"),
@@ -122,12 +122,6 @@ def build_hub(ctx: Ctx) -> dict[str, Any]:
     manifest.write_text(json.dumps({**shipped, "revision": revision, "files": {ds_id: entry}}))
     return {"id": ds_id, "entry": entry, "manifest": str(manifest), "revision": revision,
             "data": data_path.read_bytes()}  # fmt: skip
-
-
-def _shipped_manifest() -> Path:
-    from attacks.core import ROOT
-
-    return ROOT / "abco_data" / "manifest.json"
 
 
 FIXTURES = {"data": build_data, "run": build_run, "grid": build_grid, "swap": build_swap,
