@@ -18,7 +18,7 @@ lost, a mixed run folder, silent wrong data, a hang, a traceback (or no clear er
 Usage::
 
     .venv/bin/python tools/attack.py --quick           # a representative subset, ~2 min
-    .venv/bin/python tools/attack.py                   # every case, ~15 min on 2 cores
+    .venv/bin/python tools/attack.py                   # every case, 8-15 min on 2 cores
     .venv/bin/python tools/attack.py --families bounds,locks --out /tmp/attack --keep
     .venv/bin/python tools/attack.py --list            # the cases, without running them
 

@@ -134,6 +134,9 @@ def _open_run_folder(run_dir: Path, cfg: RunConfig) -> dict[str, Any] | None:
         raise RunFolderError(f"{run_dir} holds a run of another config (finished); use "
                              "another --run-dir or delete it")  # fmt: skip
     state = load_checkpoint(run_dir / CHECKPOINT, cfg.device)
+    if state is not None and config_differences(run_dir, asdict(cfg)):  # damaged: one line
+        raise RunFolderError(f"{run_dir}/{CONFIG} is not the config of its checkpoint's run; "
+                             "use another --run-dir or delete the folder")  # fmt: skip
     if state is not None and identity(state["config"]) != identity(asdict(cfg)):
         raise RunFolderError(
             f"{run_dir} holds a run of another config; use another --run-dir or delete it"
@@ -194,21 +197,29 @@ def _write_history(run_dir: Path, history: list[dict[str, Any]]) -> None:
 
 
 def _read_history(path: Path, start: int, n_actions: int) -> list[dict[str, Any]]:
-    """The metrics of iterations before ``start``, one per iteration; a line that is no
-    metrics record (cut short by a kill, or damaged) is dropped.
+    """The metrics of iterations before ``start``, one per iteration. A last line cut short
+    (a kill while it was written) is dropped; any other line that is no metrics record
+    refuses the resumption.
 
     Raises:
-        RunFolderError: ``metrics.jsonl`` is no regular file or too large.
+        RunFolderError: ``metrics.jsonl`` is no regular file, too large, or holds a line that
+            is no metrics record (the message names its number).
     """
     if not path.exists():
         return []
+    lines = read_capped(path, MAX_JSON_BYTES).decode("utf-8", "replace").splitlines()
     history: dict[int, dict[str, Any]] = {}
-    for line in read_capped(path, MAX_JSON_BYTES).decode("utf-8", "replace").splitlines():
+    for number, line in enumerate(lines, 1):
         try:
             record = json.loads(line)
         except (ValueError, RecursionError):
-            continue  # a line cut short by a kill; its iteration is in the checkpoint or redone
-        if _is_record(record, n_actions) and record["iteration"] < start:
+            if number == len(lines):
+                continue  # cut short by a kill; its iteration is in the checkpoint or redone
+            record = None
+        if not _is_record(record, n_actions):
+            raise RunFolderError(f"{path} line {number} is no metrics record; delete the run "
+                                 "folder (or that line) to resume")  # fmt: skip
+        if record["iteration"] < start:
             history[record["iteration"]] = record
     return [history[i] for i in sorted(history)]
 

@@ -27,6 +27,7 @@ it is a finished run's record of the very config asked for (:func:`finished_resu
 from __future__ import annotations
 
 import json
+import math
 import os
 import stat
 from collections.abc import Callable, Mapping
@@ -94,13 +95,12 @@ def open_regular(path: str | os.PathLike[str]) -> IO[bytes]:
         OSError: It cannot be opened (missing, no permission).
     """
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
-    handle = open(fd, "rb")  # noqa: SIM115 (handed to the caller, who closes it)
     mode = os.fstat(fd).st_mode
-    if not stat.S_ISREG(mode):
-        handle.close()
+    if not stat.S_ISREG(mode):  # before open(): a folder's descriptor would fail unnamed
+        os.close(fd)
         raise RunFolderError(f"{path} is {file_kind(mode)}, not a regular file; abco reads only "
                              "regular files of a run folder")  # fmt: skip
-    return handle
+    return open(fd, "rb")  # noqa: SIM115 (handed to the caller, who closes it)
 
 
 def read_capped(path: str | os.PathLike[str], cap: int) -> bytes:
@@ -217,15 +217,21 @@ def _final_problem(record: Any, config: Mapping[str, Any]) -> str | None:
     if not isinstance(record.get("status"), str):
         return "no status"
     for key in ("env", "method", "seed"):
-        if key in record and (record[key] != config.get(key) or isinstance(record[key], bool)):
+        if key not in record:
+            return f"no {key}"
+        if record[key] != config.get(key) or isinstance(record[key], bool):
             return f"its {key} is {str(record[key])[:40]!r}, not {config.get(key)!r}"
     if not isinstance(record.get("message", ""), str) or \
             type(record.get("iteration", 0)) is not int:  # fmt: skip
         return "a failure's message or iteration of another type"
-    for score in (v for v in record.values() if isinstance(v, dict) and "performance" in v):
-        if not all(_number(score.get(k)) for k in ("performance", "aer", "success_rate")) \
+    scores = [v for v in record.values() if isinstance(v, dict) and "performance" in v]
+    if record["status"] == "ok" and not scores:
+        return "a finished run without any evaluation"
+    for score in scores:
+        if not all(_number(score.get(k)) and math.isfinite(score[k])
+                   for k in ("performance", "aer", "success_rate")) \
                 or type(score.get("episodes")) is not int:  # fmt: skip
-            return "an evaluation without its numbers"
+            return "an evaluation without its (finite) numbers"
         if not 0 <= score["success_rate"] <= 1:  # NaN too
             return "an evaluation whose success rate is no share"
     figures, counts = record.get("figures", {}), record.get("interactions", {})

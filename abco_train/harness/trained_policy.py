@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, cast
 
@@ -43,7 +43,7 @@ from abco_train.harness.run_folder import (
 from abco_train.harness.runtime import resolve_device, seed_everything
 from abco_train.harness.training_data import TrainingData, load_training_data
 from abco_train.methods.base import Method
-from abco_train.methods.registry import config_from_record, get_method
+from abco_train.methods.registry import config_from_record, get_method, identity, resolve_config
 
 __all__ = ["Policy", "load_policy", "record_gif"]
 
@@ -109,13 +109,16 @@ def load_policy(run_dir: str | os.PathLike[str], *, device: str = "cpu", quiet: 
     try:
         if not isinstance(record, dict):
             raise TypeError(f"a JSON {type(record).__name__}, not an object")
-        cfg = config_from_record(record).validate()
+        cfg = resolve_config(config_from_record(record))
     except (ConfigError, TypeError, ValueError) as exc:
         raise RunFolderError(f"{config} holds no config abco can read: {exc}") from None
     cfg = cfg.replace(run_dir=str(run_dir), quiet=quiet, device=resolve_device(device))
     state = load_checkpoint(checkpoint, cfg.device)
     if state is None:
         raise RunFolderError(f"{checkpoint} vanished while it was read")
+    if identity(state["config"]) != identity(asdict(cfg)):
+        raise RunFolderError(f"{config} is not the config of {checkpoint}'s run; the folder "
+                             "was changed since it was written")  # fmt: skip
     rng = seed_everything(cfg.seed, cfg.threads, cfg.deterministic)
     data = load_training_data(cfg)
     method = get_method(cfg.method)(cfg, data, rng)

@@ -101,9 +101,11 @@ def test_a_folder_from_before_the_options_moved_is_still_recognised(tmp_path: Pa
     old["method_options"] = {}
     assert set(new.method_options) == set(MOVED_TO_METHOD_OPTIONS)
     (tmp_path / "config.json").write_text(json.dumps(old))
-    (tmp_path / "final.json").write_text(json.dumps({"status": "ok"}))
+    final = {"env": "CartPole-v1", "method": "bco", "seed": 0, "status": "ok",
+             "episodes": {"performance": 1.0, "aer": 500.0, "success_rate": 1.0, "episodes": 5}}
+    (tmp_path / "final.json").write_text(json.dumps(final))
     assert identity(old) == identity(asdict(new))
-    assert finished_result(tmp_path, asdict(new)) == {"status": "ok"}
+    assert finished_result(tmp_path, asdict(new)) == final
     assert resolve_config(config_from_record(old)).method_options == new.method_options
     changed = new.replace(method_options={**new.method_options, "idm_epochs": 9})
     assert finished_result(tmp_path, asdict(changed)) is None

@@ -212,10 +212,13 @@ def test_other_datasets_make_another_run(tmp_path):
     from abco_train.harness.run_folder import config_differences, finished_result
 
     (tmp_path / "config.json").write_text(json.dumps({"env": "Acrobot-v1", "pre_data": None}))
-    (tmp_path / "final.json").write_text(json.dumps({"status": "ok"}))
-    same = {"env": "Acrobot-v1", "pre_data": None, "run_dir": "elsewhere", "quiet": True}
+    final = {"env": "Acrobot-v1", "method": "abco", "seed": 0, "status": "ok",
+             "episodes": {"performance": 1.0, "aer": -80.0, "success_rate": 1.0, "episodes": 3}}
+    (tmp_path / "final.json").write_text(json.dumps(final))
+    same = {"env": "Acrobot-v1", "pre_data": None, "run_dir": "elsewhere", "quiet": True,
+            "method": "abco", "seed": 0}
     held = {"env": "Acrobot-v1", "pre_data": "abco/acrobot-pre-held-v0"}
     assert config_differences(tmp_path, same) == []
-    assert finished_result(tmp_path, same) == {"status": "ok"}
+    assert finished_result(tmp_path, same) == final
     assert config_differences(tmp_path, held) == ["pre_data"]
     assert finished_result(tmp_path, held) is None

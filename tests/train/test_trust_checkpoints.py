@@ -307,16 +307,38 @@ def test_converting_what_is_not_there_or_damaged_is_one_line(stopped, tmp_path) 
     assert ckpt.read_bytes() == buffer.getvalue()
 
 
-def test_crafted_metrics_lines_are_dropped_when_resuming(stopped, tmp_path) -> None:
+@pytest.mark.parametrize("crafted", [
+    '{"iteration": "0"}', '{"iteration": 0, "eval": 5}', "[" * 100_000, "NaN",
+    '{"iteration": 0, "seconds": 1, "train": {}, "eval": {"performance": 1, "aer": 1,'
+    ' "success_rate": 1}, "label_distribution": [1, 2, 3]}',  # CartPole has 2 actions
+    '{"iteration": 0, "seconds": 1, "train": {"idm_chance": "x"}, "eval": {}}',
+])  # fmt: skip
+def test_crafted_metrics_lines_refuse_the_resumption(stopped, tmp_path, crafted) -> None:
     cfg, run_dir = _copy(stopped, tmp_path)
     metrics = run_dir / "metrics.jsonl"
-    crafted = ['{"iteration": "0"}', '{"iteration": 0, "eval": 5}', "[" * 100_000, "NaN",
-               '{"iteration": 0, "seconds": 1, "train": {}, "eval": {"performance": 1, "aer": 1,'
-               ' "success_rate": 1}, "label_distribution": [1, 2, 3]}',  # CartPole has 2 actions
-               '{"iteration": 0, "seconds": 1, "train": {"idm_chance": "x"}, "eval": {}}']
-    metrics.write_text("\n".join([*crafted, *metrics.read_text().splitlines()]) + "\n")
+    metrics.write_text("\n".join([crafted, *metrics.read_text().splitlines()]) + "\n")
+    before = metrics.read_bytes()
+    with pytest.raises(RunFolderError, match="metrics.jsonl line 1 is no metrics record"):
+        train(cfg)
+    assert metrics.read_bytes() == before
+
+
+def test_a_last_metrics_line_cut_by_a_kill_is_dropped(stopped, tmp_path) -> None:
+    cfg, run_dir = _copy(stopped, tmp_path)
+    metrics = run_dir / "metrics.jsonl"
+    metrics.write_text(metrics.read_text() + '{"iteration": 1, "tra')
     resumed = train(cfg)
     assert resumed is not None
     _same_result(resumed, stopped[2])
     rows = [json.loads(x) for x in metrics.read_text().splitlines()]
     assert [r["iteration"] for r in rows] == [0, 1]
+
+
+@pytest.mark.parametrize("config", ["[]", '{"env": "CartPole-v1", "seed": "x"}', "[" * 100_000,
+                                    '{"env": "Cart'])  # fmt: skip
+def test_a_damaged_config_json_refuses_the_resumption(stopped, tmp_path, config) -> None:
+    cfg, run_dir = _copy(stopped, tmp_path)
+    (run_dir / "config.json").write_text(config)
+    with pytest.raises(RunFolderError, match="config"):
+        train(cfg)
+    assert (run_dir / "config.json").read_text() == config

@@ -90,19 +90,26 @@ def folder(tiny_data, tmp_path) -> tuple[Any, Path]:
     return cfg, tmp_path / "run"
 
 
+_CELL = '"env": "CartPole-v1", "method": "bco", "seed": 0'
+
+
 @pytest.mark.parametrize(("final", "message"), [
     ("{}", "no status"),
     ("[]", "a JSON list, not an object"),
     ("NaN", "a JSON float, not an object"),
     ('{"status": 1}', "no status"),
+    ('{"status": "ok"}', "no env"),
     ('{"status": "ok", "env": "Acrobot-v1"}', "its env is 'Acrobot-v1', not 'CartPole-v1'"),
-    ('{"status": "ok", "seed": true}', "its seed is 'True'"),
-    ('{"status": "ok", "episodes": {"performance": "high", "aer": 0, "success_rate": 1,'
-     ' "episodes": 2}}', "an evaluation without its numbers"),
-    ('{"status": "ok", "episodes": {"performance": 1, "aer": 0, "success_rate": NaN,'
-     ' "episodes": 2}}', "success rate is no share"),
-    ('{"status": "failed", "message": ["x"]}', "a failure's message"),
-    ('{"status": "ok", "figures": [1]}', "figures that are not file names"),
+    ('{"status": "ok", "env": "CartPole-v1", "method": "bco", "seed": true}',
+     "its seed is 'True'"),
+    ('{"status": "ok", ' + _CELL + '}', "a finished run without any evaluation"),
+    ('{"status": "ok", ' + _CELL + ', "episodes": "x"}', "a finished run without any"),
+    ('{"status": "ok", ' + _CELL + ', "episodes": {"performance": "high", "aer": 0,'
+     ' "success_rate": 1, "episodes": 2}}', "an evaluation without its (finite) numbers"),
+    ('{"status": "ok", ' + _CELL + ', "episodes": {"performance": NaN, "aer": 0,'
+     ' "success_rate": 1, "episodes": 2}}', "an evaluation without its (finite) numbers"),
+    ('{"status": "failed", ' + _CELL + ', "message": ["x"]}', "a failure's message"),
+    ('{"status": "failed", ' + _CELL + ', "figures": [1]}', "figures that are not file names"),
     ("[" * 100_000, "nested too deeply"),
 ])  # fmt: skip
 def test_a_crafted_final_json_is_never_a_result(folder, capsys, final, message) -> None:

@@ -185,7 +185,8 @@ RUN_CASES: dict[str, tuple[Callable[[Path], None], bool, tuple[str, ...], bool]]
 
 
 #: What a kill during a write leaves (a last line cut short): resuming past it is fine.
-RESUMABLE = {"metrics.jsonl truncated"}
+#: Case -> the file resuming rewrites without the cut line.
+RESUMABLE = {"metrics.jsonl truncated": "metrics.jsonl"}
 
 
 def run_case(ctx: Ctx, name: str, craft: Callable[[Path], None], final: bool, use: str
@@ -202,7 +203,8 @@ def run_case(ctx: Ctx, name: str, craft: Callable[[Path], None], final: bool, us
     # a config that does not fit the checkpoint or the data: naming either side is clear
     also = ("checkpoint.pt", ".hdf5") if named == "config.json" else ()
     if use == "resume" and name in RESUMABLE and res.rc == 0 and not res.err.strip():
-        return kept(before, run, ok("resumed past it, as after a kill"))
+        rest = {k: v for k, v in before.items() if k != RESUMABLE[name]}  # rewritten whole
+        return kept(rest, run, ok("resumed past it, as after a kill"))
     outcome = api_refused(res) if use == "load_policy" else \
         refused(res, mention=(named, *also))  # fmt: skip
     return kept(before, run, outcome)
