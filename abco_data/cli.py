@@ -98,6 +98,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
     from abco_data.manifest import data_home
     from abco_data.registry import spec
 
+    if args.layouts is not None and args.layouts < 1:  # checked even where nothing is cached
+        raise UsageError(f"--layouts must be >= 1, got {args.layouts}")
     if Path(args.id).is_file():
         path, s = Path(args.id), None
     else:

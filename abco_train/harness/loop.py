@@ -197,9 +197,9 @@ def _write_history(run_dir: Path, history: list[dict[str, Any]]) -> None:
 
 
 def _read_history(path: Path, start: int, n_actions: int) -> list[dict[str, Any]]:
-    """The metrics of iterations before ``start``, one per iteration. A last line cut short
-    (a kill while it was written) is dropped; any other line that is no metrics record
-    refuses the resumption.
+    """The metrics of iterations before ``start``, one per iteration, every one of them. A last
+    line cut short (a kill while it was written) is dropped; any other line that is no metrics
+    record, or a missing iteration, refuses the resumption.
 
     Raises:
         RunFolderError: ``metrics.jsonl`` is no regular file, too large, or holds a line that
@@ -210,18 +210,22 @@ def _read_history(path: Path, start: int, n_actions: int) -> list[dict[str, Any]
     lines = read_capped(path, MAX_JSON_BYTES).decode("utf-8", "replace").splitlines()
     history: dict[int, dict[str, Any]] = {}
     for number, line in enumerate(lines, 1):
+        record: Any = None
         try:
             record = json.loads(line)
         except (ValueError, RecursionError):
             if number == len(lines):
                 continue  # cut short by a kill; its iteration is in the checkpoint or redone
-            record = None
-        if not _is_record(record, n_actions):
+        if not isinstance(record, dict) or not _is_record(record, n_actions):
             raise RunFolderError(f"{path} line {number} is no metrics record; delete the run "
                                  "folder (or that line) to resume")  # fmt: skip
         if record["iteration"] < start:
             history[record["iteration"]] = record
-    return [history[i] for i in sorted(history)]
+    missing = [i for i in range(start) if i not in history]
+    if missing:  # the checkpoint is after them: their records were written before it
+        raise RunFolderError(f"{path} lacks the record of iteration {missing[0]}, which its "
+                             "checkpoint follows; delete the run folder to start again")
+    return [history[i] for i in range(start)]
 
 
 def _is_record(record: Any, n_actions: int) -> bool:

@@ -72,3 +72,9 @@ def test_python_dash_m():
     out = subprocess.run([sys.executable, "-m", "abco_data", "list"], capture_output=True,
                          text=True, check=True)
     assert "abco/cartpole-expert-v0" in out.stdout
+
+
+def test_info_refuses_a_layout_count_below_one_even_uncached(tmp_path, capsys):
+    argv = ["info", "abco/maze5x5-expert-v0", "--cache-dir", str(tmp_path), "--layouts", "0"]
+    assert cli.main(argv) == 2
+    assert capsys.readouterr().err.strip() == "error: --layouts must be >= 1, got 0"

@@ -342,3 +342,11 @@ def test_a_damaged_config_json_refuses_the_resumption(stopped, tmp_path, config)
     with pytest.raises(RunFolderError, match="config"):
         train(cfg)
     assert (run_dir / "config.json").read_text() == config
+
+
+def test_metrics_without_the_checkpointed_iterations_refuse_the_resumption(stopped,
+                                                                           tmp_path) -> None:
+    cfg, run_dir = _copy(stopped, tmp_path)
+    (run_dir / "metrics.jsonl").write_text("not json\n")  # a last line, but nothing before it
+    with pytest.raises(RunFolderError, match="lacks the record of iteration 0"):
+        train(cfg)
