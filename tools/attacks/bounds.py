@@ -16,7 +16,18 @@ from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 
-from attacks.core import Case, Ctx, Outcome, Result, fail, json_line, ok, refused, run_command
+from attacks.core import (
+    Case,
+    Ctx,
+    Outcome,
+    Result,
+    fail,
+    json_line,
+    ok,
+    probe_answer,
+    refused,
+    run_command,
+)
 from attacks.fixtures import (
     bench_flags,
     copy_grid,
@@ -202,13 +213,9 @@ API_CASES = {
 def api(ctx: Ctx, name: str, call: str) -> Outcome:
     base = ctx.scratch(name)
     res = ctx.python(_CALL.format(call=call), str(base), timeout=90)
-    if res.timed_out:
-        return fail("hang", f"still running after {res.timeout:.0f} s")
-    answer = json_line(res)
-    if answer is None:
-        return fail("traceback", res.summary())
-    if answer.get("accepted"):
-        return fail("silent", "accepted")
+    failed, answer = probe_answer(res, accepted="accepted")
+    if failed is not None:
+        return failed
     if answer["error"] == "MemoryError":
         return fail("traceback", "MemoryError: allocated before checking the size")
     return ok(f"{answer['error']}: {answer['message'][:150]}")

@@ -23,7 +23,7 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-from attacks.core import Case, Ctx, Outcome, Result, fail, json_line, kept, ok, refused, snapshot
+from attacks.core import Case, Ctx, Outcome, Result, fail, kept, ok, probe_answer, refused, snapshot
 from attacks.fixtures import bench_flags, copy_run, train_flags
 
 FAMILY = "checkpoints"
@@ -128,13 +128,9 @@ def _load_policy(ctx: Ctx, name: str, write: Callable[..., object], mention: boo
 
 def _api_refused(res: Result, mention: str | None) -> Outcome:
     """A Python call that must raise one clear exception (not load, not crash)."""
-    if res.timed_out:
-        return fail("hang", f"still running after {res.timeout:.0f} s")
-    answer = json_line(res)
-    if answer is None:
-        return fail("traceback", res.summary())
-    if answer.get("loaded"):
-        return fail("silent", "loaded without an error")
+    failed, answer = probe_answer(res)
+    if failed is not None:
+        return failed
     message = str(answer.get("message", ""))
     if mention and mention not in message:
         return fail("traceback", f"{answer.get('error')} does not name {mention}: "

@@ -376,3 +376,16 @@ def json_line(res: Result) -> dict[str, Any] | None:
                 value = json.loads(line)
                 return value if isinstance(value, dict) else None
     return None
+
+
+def probe_answer(res: Result, accepted: str = "loaded") -> tuple[Outcome | None, dict[str, Any]]:
+    """A Python probe that must refuse: a failure when it hung, printed no answer or was
+    ``accepted`` (its answer's key); else ``None`` and its answer."""
+    if res.timed_out:
+        return fail("hang", f"still running after {res.timeout:.0f} s"), {}
+    answer = json_line(res)
+    if answer is None:
+        return fail("traceback", res.summary()), {}
+    if answer.get(accepted):
+        return fail("silent", f"{accepted} without an error"), answer
+    return None, answer

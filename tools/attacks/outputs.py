@@ -149,17 +149,22 @@ def play_out(ctx: Ctx, kind: str) -> Outcome:
     return fail("lost", f"changed: {gone[:3]}") if gone and not outcome.failed else outcome
 
 
+def _special_target(base: Path, kind: str, inside: str | None, folder: str
+                    ) -> tuple[Path, Callable[[], bool] | None]:  # fmt: skip
+    """An output path that is a special file of ``kind`` (``inside`` ``None``), or a new
+    ``folder`` whose file ``inside`` is one; with :func:`make`'s record of it."""
+    if inside is None:
+        return base / "target", make(kind, base / "target")
+    path = base / folder
+    path.mkdir()
+    return path, make(kind, path / inside)
+
+
 def report_out(ctx: Ctx, kind: str, inside: str | None = None) -> Outcome:
     """``abco report --out`` a special file, or a folder whose ``inside`` file is one."""
     base = ctx.scratch(f"report out {kind} {inside}")
     grid = copy_grid(ctx, base / "grid")
-    if inside is None:
-        path = base / "target"
-        intact = make(kind, path)
-    else:
-        path = base / "report"
-        path.mkdir()
-        intact = make(kind, path / inside)
+    path, intact = _special_target(base, kind, inside, "report")
     if intact is None:
         return skip("mknod is not allowed here (not root)")
     res = ctx.abco("report", str(grid), "--out", str(path), timeout=60)
@@ -169,13 +174,7 @@ def report_out(ctx: Ctx, kind: str, inside: str | None = None) -> Outcome:
 def bench_out(ctx: Ctx, kind: str, inside: str | None = None) -> Outcome:
     """``abco bench --out`` a special file, or a grid whose ``inside`` file is one."""
     base = ctx.scratch(f"bench out {kind} {inside}")
-    if inside is None:
-        path = base / "target"
-        intact = make(kind, path)
-    else:
-        path = base / "grid"
-        path.mkdir()
-        intact = make(kind, path / inside)
+    path, intact = _special_target(base, kind, inside, "grid")
     if intact is None:
         return skip("mknod is not allowed here (not root)")
     res = ctx.abco("bench", "--envs", "CartPole-v1", "--methods", "bco", "--seeds", "0",

@@ -21,9 +21,9 @@ from attacks.core import (
     Outcome,
     Result,
     fail,
-    json_line,
     kept,
     ok,
+    probe_answer,
     refused,
     skip,
     snapshot,
@@ -101,13 +101,9 @@ else:
 def api_refused(res: Result) -> Outcome:
     """A Python call that must raise one of abco's own errors (not load, not crash with a
     KeyError or a RecursionError)."""
-    if res.timed_out:
-        return fail("hang", f"still running after {res.timeout:.0f} s")
-    answer = json_line(res)
-    if answer is None:
-        return fail("traceback", res.summary())
-    if answer.get("loaded"):
-        return fail("silent", "loaded without an error")
+    failed, answer = probe_answer(res)
+    if failed is not None:
+        return failed
     what = f"{answer['error']}: {answer['message'][:160]}"
     if not str(answer.get("module", "")).startswith("abco"):
         return fail("traceback", f"not an abco error: {what}")
