@@ -27,14 +27,13 @@ import json
 import math
 import os
 import re
-import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from abco_train.config.limits import MAX_ITERATIONS, MAX_SEED
 from abco_train.config.run import MAX_LAYOUTS
-from abco_train.harness.run_folder import RunFolderError
+from abco_train.harness.run_folder import RunFolderError, open_regular
 
 __all__ = [
     "MAX_RECORD_BYTES", "MAX_LOG_BYTES", "RecordError", "Skipped", "escape", "seed_of",
@@ -108,27 +107,26 @@ def check_name(value: Any, what: str) -> str:
 
 
 def read_bytes(path: Path, cap: int) -> bytes:
-    """The bytes of a regular file of at most ``cap`` bytes (``FileNotFoundError`` if absent).
+    """The bytes of a regular file of at most ``cap`` bytes (``FileNotFoundError`` if absent),
+    opened as the run folder opens its files (:func:`abco_train.harness.run_folder.open_regular`).
 
     Raises:
         RecordError: Not a regular file, too large, or unreadable.
     """
     try:
-        if not stat.S_ISREG(os.stat(path).st_mode):  # a device, FIFO or folder: never opened
-            raise RecordError("not a regular file")
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+        handle = open_regular(path)
     except FileNotFoundError:
         raise
+    except RunFolderError:  # a device, FIFO or folder: never read
+        raise RecordError("not a regular file") from None
     except OSError as exc:
         raise RecordError(f"cannot be read ({exc.strerror or exc})") from None
-    with os.fdopen(fd, "rb") as f:
-        info = os.fstat(f.fileno())
-        if not stat.S_ISREG(info.st_mode):  # replaced since the check
-            raise RecordError("not a regular file")
-        if info.st_size > cap:
-            raise RecordError(f"{info.st_size:,} bytes, over the limit of {cap:,}")
+    with handle:
+        size = os.fstat(handle.fileno()).st_size
+        if size > cap:
+            raise RecordError(f"{size:,} bytes, over the limit of {cap:,}")
         try:
-            data = f.read(cap + 1)
+            data = handle.read(cap + 1)
         except OSError as exc:
             raise RecordError(f"cannot be read ({exc.strerror or exc})") from None
     if len(data) > cap:
