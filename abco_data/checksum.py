@@ -36,6 +36,8 @@ from abco_data.files import file_digest
 from abco_data.generate import GENERATOR, GENERATOR_VERSION, generate
 from abco_data.manifest import Manifest, as_manifest
 from abco_data.registry import DATASET_IDS, spec
+from abco_data.user_datasets import user_entry
+from abco_data.user_ids import is_user_id
 
 __all__ = ["ExpectedDigest", "expected_digest", "check_checksum", "claimed_overrides"]
 
@@ -117,7 +119,8 @@ def expected_digest(ds: Dataset, *,
                     manifest: Manifest | str | os.PathLike[str] | None = None
                     ) -> ExpectedDigest | None:
     """The digest ``ds``'s file must have (see the module docstring), or None when no
-    checksum can be known: an id neither the manifest nor this abco's registry knows.
+    checksum can be known: an id neither the manifest, this abco's registry nor the user
+    manifest (:mod:`abco_data.user_datasets`: a registered user dataset) knows.
 
     Raises:
         CorruptDatasetError: Unreadable claims (see :func:`claimed_overrides`).
@@ -128,7 +131,9 @@ def expected_digest(ds: Dataset, *,
     if not overrides and entry is not None:
         return ExpectedDigest(entry.size, entry.sha256, f"the manifest entry of {ds.id}")
     if ds.id not in DATASET_IDS:
-        return None
+        user = user_entry(ds.id) if is_user_id(ds.id) else None
+        return None if user is None else ExpectedDigest(
+            user.size, user.sha256, f"the user manifest entry of {ds.id}")
     made_by = (ds.attrs.get("generator"), ds.attrs.get("generator_version"))
     if made_by != (GENERATOR, GENERATOR_VERSION):
         raise ChecksumError(f"{ds.path}: made by generator {made_by[0]!r} version"

@@ -1,4 +1,5 @@
-"""Command line of the dataset layer: ``abco data list|info|generate|download|verify|push``.
+"""Command line of the dataset layer: ``abco data list|info|generate|download|verify|push``,
+and for the user's own datasets ``record`` and ``import-minari`` (:mod:`abco_data.cli_user`).
 
 ``abco_train``'s ``abco`` script mounts these with :func:`add_subcommands`; ``python -m
 abco_data`` runs them on their own through :func:`main`. Every action parser sets
@@ -8,8 +9,10 @@ A dataset problem ends in one line ``error: ...`` on stderr, never a traceback: 
 for bad input (an unknown id, a bad ``--set``, a file that does not exist or is of another
 kind, a count beyond its bound, an output path that is a device, a FIFO, a folder or a
 link), 1 for an operation that failed (a corrupt file, a checksum mismatch, no source for a
-dataset, a full disk). Programming errors keep their traceback. Output cut short by its
-reader (``abco data list | head``) ends quietly, with exit status 141 as ``SIGPIPE`` gives.
+dataset, a full disk); an environment whose optional package is missing (LunarLander's
+Box2D) names the extra to install, exit status 2. Programming errors keep their traceback.
+Output cut short by its reader (``abco data list | head``) ends quietly, with exit status 141
+as ``SIGPIPE`` gives.
 
 Example:
     >>> main(["list"])  # doctest: +ELLIPSIS
@@ -28,6 +31,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from gymnasium.error import DependencyNotInstalled
+
+from abco_data.cli_user import add_user_actions, print_user_info, user_list_rows
 from abco_data.errors import (
     DatasetError,
     DatasetReadError,
@@ -36,6 +42,7 @@ from abco_data.errors import (
     UnknownDatasetError,
     WrongKindError,
 )
+from abco_data.user_ids import is_user_id
 
 __all__ = ["add_subcommands", "main", "build_parser", "run", "EXIT_FAILED", "EXIT_BAD_INPUT",
            "EXIT_BROKEN_PIPE", "UsageError"]
@@ -81,15 +88,18 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
     home = Path(args.cache_dir) if args.cache_dir else data_home()
     manifest = _manifest()
-    width = max(map(len, DATASET_IDS))
-    print(f"{'id':<{width}} {'env':<18} {'kind':<19} {'size':>9}  {'source':<9}  cached")
+    rows = []
     for ds_id in DATASET_IDS:
         s = spec(ds_id)
         entry = None if manifest is None else manifest.entry(ds_id)
         size = f"{entry.size / 1e6:.1f} MB" if entry is not None else "-"
         cached = "yes" if (home / s.filename).is_file() else "no"
-        print(f"{ds_id:<{width}} {s.env_id:<18} {s.kind:<19} {size:>9}  "
-              f"{_source(manifest, ds_id):<9}  {cached}")
+        rows.append((ds_id, s.env_id, s.kind, size, _source(manifest, ds_id), cached))
+    rows += user_list_rows(home)  # the user's own datasets, after the built-in ones
+    width = max(len(row[0]) for row in rows)
+    print(f"{'id':<{width}} {'env':<18} {'kind':<19} {'size':>9}  {'source':<9}  cached")
+    for ds_id, env_id, kind, size, source, cached in rows:
+        print(f"{ds_id:<{width}} {env_id:<18} {kind:<19} {size:>9}  {source:<9}  {cached}")
     return 0
 
 
@@ -102,6 +112,9 @@ def _cmd_info(args: argparse.Namespace) -> int:
         raise UsageError(f"--layouts must be >= 1, got {args.layouts}")
     if Path(args.id).is_file():
         path, s = Path(args.id), None
+    elif is_user_id(args.id):
+        s = None
+        path = print_user_info(args.id, Path(args.cache_dir) if args.cache_dir else data_home())
     else:
         s = spec(args.id)
         path = (Path(args.cache_dir) if args.cache_dir else data_home()) / s.filename
@@ -236,6 +249,7 @@ def _add_actions(sub: Any) -> None:
     p.add_argument("--timeout", type=float, default=VERIFY_TIMEOUT,
                    help=f"give up after this many seconds (default {VERIFY_TIMEOUT:g})")
     p.set_defaults(func=_cmd_verify)
+    add_user_actions(sub)  # record, import-minari
     p = sub.add_parser("push", help="upload a dataset and its card to a Hub dataset repo")
     p.add_argument("id")
     p.add_argument("--repo", required=True, help="dataset repo, owner/name")
@@ -274,8 +288,8 @@ def run(args: argparse.Namespace) -> int:
         os.close(devnull)
         return EXIT_BROKEN_PIPE
     except (UsageError, UnknownDatasetError, WrongKindError, DatasetReadError,
-            InvalidParameterError, InvalidTargetError) as err:
-        print(f"error: {err}", file=sys.stderr)
+            InvalidParameterError, InvalidTargetError, DependencyNotInstalled) as err:
+        print(f"error: {err}", file=sys.stderr)  # a missing package: the extra to install
         return EXIT_BAD_INPUT
     except DatasetError as err:
         print(f"error: {err}", file=sys.stderr)

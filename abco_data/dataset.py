@@ -251,10 +251,11 @@ class Dataset:
 
     # -- flat views ---------------------------------------------------------------------------
 
-    def load_arrays(self) -> DatasetArrays:
+    def load_arrays(self, *, observations: bool = True) -> DatasetArrays:
         """Every column in memory as numpy arrays (each read into one allocation).
 
-        Palette-encoded observations are decoded chunk by chunk into the one output array.
+        Palette-encoded observations are decoded chunk by chunk into the one output array;
+        with ``observations=False`` none are read (the column comes back with zero rows).
         """
         f = self._file()
         reader = self._observations()
@@ -267,7 +268,7 @@ class Dataset:
         def optional(name: str) -> np.ndarray | None:
             return column(name) if name in f else None
 
-        n_obs = self.num_transitions + self.num_episodes
+        n_obs = self.num_transitions + self.num_episodes if observations else 0
         with hdf5_errors(self.path, "columns"):  # the observations last, as they are read
             arrays = DatasetArrays(
                 actions=optional(ACTIONS), idm_eval_actions=optional(IDM_EVAL_ACTIONS),

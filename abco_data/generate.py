@@ -167,6 +167,7 @@ def generate(dataset_id: str, path: str | os.PathLike[str] | None = None, *,
         InvalidTargetError: ``path`` is a device, a FIFO, a folder or a symbolic link
             (refused before any work; left untouched).
         DatasetWriteError: Writing failed (e.g. a full disk); ``path`` was left untouched.
+        MissingDependencyError: A package the env needs is missing (the line names the extra).
     """
     import gymnasium as gym
 

@@ -1,7 +1,8 @@
 """The header of an open dataset file, read and checked: what :func:`open_dataset` trusts.
 
 :func:`read_header` checks the format (:func:`~abco_data.format.check_header`), that the id
-agrees with the env and kind (and is one abco knows), the counts and the episode offsets
+agrees with the env and kind (and is one abco knows, or a user id:
+:mod:`abco_data.user_ids`), the counts and the episode offsets
 against the columns, the reference returns, and the spaces against the stored observations;
 it reads no bulk data.
 """
@@ -30,9 +31,11 @@ from abco_data.format import (
     read_column,
     space_from_json,
 )
+from abco_data.generate import GENERATOR
 from abco_data.manifest import read_manifest
 from abco_data.reference import ReferenceReturns
 from abco_data.registry import ACTION_COUNTS, DATASET_IDS, spec
+from abco_data.user_ids import is_user_id
 
 __all__ = ["Header", "read_header", "read_whole_column"]
 
@@ -128,7 +131,8 @@ def _check_identity(attrs: Mapping[str, Any], path: Path, dataset_id: str | None
             raise CorruptDatasetError(
                 f"{path}: claims dataset {claimed} ({s.env_id}, {s.kind}) but holds"
                 f" {attrs['env_id']!r} {attrs['kind']!r} data")
-    elif claimed not in read_manifest().files:
+    elif claimed not in read_manifest().files and not (
+            is_user_id(claimed) and attrs["generator"] != GENERATOR):  # it writes built-ins only
         raise CorruptDatasetError(f"{path}: holds an unknown dataset id {claimed!r}")
 
 

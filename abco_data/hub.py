@@ -64,6 +64,7 @@ from abco_data.errors import (
     DatasetWriteError,
     WrongKindError,
 )
+from abco_data.fetch_lock import acquire_fetch_lock
 from abco_data.files import (
     atomic_target,
     check_target,
@@ -88,6 +89,8 @@ from abco_data.manifest import (
 )
 from abco_data.progress import log_progress_class
 from abco_data.registry import check_layout_count, spec
+from abco_data.user_datasets import load_user_dataset
+from abco_data.user_ids import is_user_id
 
 __all__ = [
     "DEFAULT_REPO_ID",
@@ -299,6 +302,12 @@ def fetch(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
     """
     man = as_manifest(manifest)
     target = cached_path(dataset_id, cache_dir, manifest=man)
+    with acquire_fetch_lock(target, dataset_id, _cache_error):  # one fetch at a time
+        return _fetch(dataset_id, man, target, revision, offline, progress)
+
+
+def _fetch(dataset_id: str, man: Manifest, target: Path, revision: str | None,
+           offline: bool | None, progress: bool) -> Path:  # fmt: skip
     entry = man.entry(dataset_id)
     remove_stale_temporaries(target.parent)  # left by killed downloads and generations
     if entry is None:
@@ -336,6 +345,9 @@ def load(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
         layouts: Maze datasets: keep the episodes of the first ``layouts`` layouts only
             (:meth:`~abco_data.Dataset.first_layouts`); the whole file is fetched and checked.
 
+    A user dataset id (``local/NAME-v0``) opens its registered file once checked against the
+    user manifest of ``cache_dir`` (:func:`abco_data.user_datasets.load_user_dataset`).
+
     Returns:
         The opened dataset (:func:`abco_data.open_dataset` of the cached file).
 
@@ -350,6 +362,8 @@ def load(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
         InvalidTargetError: The cache holds something else than a regular file under the
             dataset's name (a FIFO, a device, a folder, a symbolic link).
     """
+    if is_user_id(dataset_id):  # the user's own: its registered file, checked
+        return load_user_dataset(dataset_id, cache_dir, layouts=layouts)
     if layouts is not None:  # a bad count fails now, not after minutes of generation
         wanted = spec(dataset_id)
         if not wanted.is_maze:

@@ -35,7 +35,8 @@ import numpy as np
 from abco_envs.maze.rules import MAX_EPISODE_STEPS
 
 __all__ = ["ReferenceReturns", "maze_reference", "layout_reference", "fresh_reference",
-           "classic_reference", "REFERENCE_SEED", "REFERENCE_EPISODES"]
+           "classic_reference", "protocol_reference", "REFERENCE_SEED", "REFERENCE_EPISODES",
+           "PAPER_MAX_VISITS", "PAPER_FAIL_RETURN"]
 
 #: Seed root of every reference computation (independent of the datasets' seeds).
 REFERENCE_SEED = 12345
@@ -45,6 +46,14 @@ REFERENCE_EPISODES = 100
 _LAYOUT_STREAM = 2
 #: The maze's step limit, which caps every random walk (the env's own rule).
 MAZE_MAX_STEPS = MAX_EPISODE_STEPS
+#: The paper protocol's rule (the authors' evaluation): the 4th visit of a cell ends the
+#: episode, unsuccessful, with this return.
+PAPER_MAX_VISITS = 4
+PAPER_FAIL_RETURN = -1.0
+#: Random-walk stream of :func:`protocol_reference` (apart from the pool's and the layouts').
+_PROTOCOL_STREAM = 3
+#: Evaluation protocols :func:`protocol_reference` measures under.
+PROTOCOLS = ("paper", "standard")
 
 
 @dataclass(frozen=True, eq=False)
@@ -110,28 +119,48 @@ class ReferenceReturns:
         )
 
 
-def _random_walk_returns(cells: np.ndarray, episodes: int, seed: int | tuple[int, ...]
+def _random_walk_returns(cells: np.ndarray, episodes: int, seed: int | tuple[int, ...],
+                         protocol: str = "standard", max_steps: int | None = None
                          ) -> np.ndarray:  # fmt: skip
     """Mean return of ``episodes`` uniform random walks on each layout of ``cells`` (k, n, n),
-    drawn from the generator ``[REFERENCE_SEED, *seed, n]``."""
+    drawn from the generator ``[REFERENCE_SEED, *seed, n]``.
+
+    ``protocol`` ``"standard"`` applies the env's rules; ``"paper"`` also ends a walk with
+    return :data:`PAPER_FAIL_RETURN` when it enters (or stays in) one cell for the
+    :data:`PAPER_MAX_VISITS`-th time, the start counting as the first visit (the evaluation's
+    rule, :mod:`abco_train.harness.rollouts`). ``max_steps`` caps the walks below the env's own
+    limit, as the evaluation's ``eval_max_steps`` does.
+    """
     from abco_envs.maze.rules import MazeDynamics, episode_return, move_table
 
     k, n = cells.shape[0], cells.shape[1]
     stream = list(seed) if isinstance(seed, tuple) else [seed]
     rng = np.random.default_rng([REFERENCE_SEED, *stream, n])
     dynamics, moves = MazeDynamics(n), move_table(cells)
+    cap = MAZE_MAX_STEPS if max_steps is None else min(MAZE_MAX_STEPS, int(max_steps))
     layout = np.repeat(np.arange(k), episodes)
     cell = np.zeros(layout.size, dtype=np.intp)  # every walk starts in cell (0, 0)
     hit = np.zeros(layout.size, dtype=np.int64)  # step at which the goal was reached, 0 = never
+    looped = np.zeros(layout.size, dtype=bool)
+    visits = np.zeros((layout.size, n * n), dtype=np.int16) if protocol == "paper" else None
+    if visits is not None:
+        visits[:, 0] = 1
     active = np.arange(layout.size)
-    for t in range(1, MAZE_MAX_STEPS + 1):
+    for t in range(1, cap + 1):
         a = rng.integers(4, size=active.size)
         cell[active], _, done = dynamics.step(moves, layout[active], cell[active], a)
         hit[active[done]] = t
-        active = active[~done]
+        ended = done
+        if visits is not None:
+            visits[active, cell[active]] += 1
+            loop = (visits[active, cell[active]] >= PAPER_MAX_VISITS) & ~done
+            looped[active[loop]] = True
+            ended = done | loop
+        active = active[~ended]
         if not active.size:
             break
-    returns = episode_return(n, np.where(hit > 0, hit, MAZE_MAX_STEPS), hit > 0)
+    returns = episode_return(n, np.where(hit > 0, hit, cap), hit > 0)
+    returns[looped] = PAPER_FAIL_RETURN
     return returns.reshape(k, episodes).mean(axis=1)
 
 
@@ -216,7 +245,58 @@ def fresh_reference(size: int, count: int, seed: int = 0,
                             stream=1 + int(seed))
 
 
-def _mean_return(env_id: str, policy_for_episode, episodes: int, seed: int) -> float:
+def protocol_reference(cells: np.ndarray, protocol: str, max_steps: int | None = None, *,
+                       split: str = "layouts", episodes: int = REFERENCE_EPISODES
+                       ) -> ReferenceReturns:  # fmt: skip
+    """Per-layout references of ``cells`` measured under an evaluation protocol: the ones the
+    normalised score divides by.
+
+    The random return of a layout is the mean of ``episodes`` uniform random walks from
+    ``(0, 0)`` under ``protocol`` (``"paper"``: the 4th visit of a cell ends the walk at
+    :data:`PAPER_FAIL_RETURN`; ``"standard"``: the env's rules) and the step cap ``max_steps``
+    (``None``: the env's 1000 steps), drawn from a stream of their own
+    (``[REFERENCE_SEED, 3, protocol, n]``, never an evaluation's seed). The expert return is
+    the shortest path's under the same cap (the expert never revisits a cell, so both
+    protocols agree).
+
+    Example:
+        >>> from abco_envs.maze.pool import layout_pool
+        >>> cells = layout_pool(3).split("train")[:5]
+        >>> paper = protocol_reference(cells, "paper", episodes=50)
+        >>> standard = protocol_reference(cells, "standard", episodes=50)
+        >>> bool(paper.random_mean < standard.random_mean)
+        True
+        >>> paper.expert_mean == standard.expert_mean
+        True
+
+    Raises:
+        ValueError: An unknown protocol, no layouts, or not a stack of square layouts.
+    """
+    from abco_envs.maze.layout import layout_hash, shortest_path_length
+    from abco_envs.maze.rules import episode_return
+
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"unknown protocol {protocol!r}; expected one of {PROTOCOLS}")
+    cells = np.asarray(cells)
+    if cells.ndim != 3 or cells.shape[1] != cells.shape[2] or not len(cells):
+        raise ValueError(f"expected a (k, n, n) stack of k >= 1 layouts, got {cells.shape}")
+    size = cells.shape[1]
+    cap = MAZE_MAX_STEPS if max_steps is None else min(MAZE_MAX_STEPS, int(max_steps))
+    lengths = np.array([shortest_path_length(c) for c in cells], dtype=np.int64)
+    expert = episode_return(size, np.minimum(lengths, cap), lengths <= cap).astype(np.float64)
+    random = _random_walk_returns(cells, episodes, (_PROTOCOL_STREAM, PROTOCOLS.index(protocol)),
+                                  protocol, cap)  # fmt: skip
+    for arr in (expert, random):
+        arr.flags.writeable = False
+    return ReferenceReturns(
+        expert_mean=float(expert.mean()), random_mean=float(random.mean()),
+        layout_ids=tuple(layout_hash(c) for c in cells), layout_splits=(split,) * len(cells),
+        expert_per_layout=expert, random_per_layout=random,
+    )
+
+
+def _mean_return(env_id: str, policy_for_episode, episodes: int, seed: int,
+                 max_steps: int | None = None) -> float:  # fmt: skip
     import gymnasium as gym
 
     env = gym.make(env_id)
@@ -224,23 +304,27 @@ def _mean_return(env_id: str, policy_for_episode, episodes: int, seed: int) -> f
     for i in range(episodes):
         policy = policy_for_episode(env, seed + i)
         obs, info = env.reset(seed=seed + i)
-        done = False
+        done, steps = False, 0
         while not done:
             obs, reward, terminated, truncated, info = env.step(policy(obs, info))
             total += float(reward)
-            done = terminated or truncated
+            steps += 1
+            done = terminated or truncated or (max_steps is not None and steps >= max_steps)
     env.close()
     return total / episodes
 
 
 @lru_cache(maxsize=16)
-def classic_reference(env_id: str, episodes: int = 100, expert_episodes: int = 20
-                      ) -> ReferenceReturns:
-    """Mean returns of the expert and of uniform random actions on a classic-control env."""
+def classic_reference(env_id: str, episodes: int = 100, expert_episodes: int = 20,
+                      max_steps: int | None = None) -> ReferenceReturns:  # fmt: skip
+    """Mean returns of the expert and of uniform random actions on a classic-control env
+    (episodes capped at ``max_steps`` when given, as an evaluation's ``eval_max_steps``)."""
+    from abco_envs import check_env_dependencies
     from abco_envs.experts import RandomPolicy, expert_policy
 
+    check_env_dependencies(env_id)  # LunarLander without Box2D: one line naming the extra
     random = _mean_return(env_id, lambda env, s: RandomPolicy(env.action_space, seed=s),
-                          episodes, REFERENCE_SEED)
+                          episodes, REFERENCE_SEED, max_steps)
     expert = _mean_return(env_id, lambda env, s: expert_policy(env_id, seed=s),
-                          expert_episodes, REFERENCE_SEED + 10_000)
+                          expert_episodes, REFERENCE_SEED + 10_000, max_steps)
     return ReferenceReturns(expert_mean=expert, random_mean=random)

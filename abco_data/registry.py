@@ -1,10 +1,12 @@
 """The abco datasets: their ids and the parameters that create each one.
 
-Ids read ``abco/{name}-{kind}-v0``: ``name`` is one of the six environments, ``kind`` is
+Ids read ``abco/{name}-{kind}-v0``: ``name`` is one of the seven environments, ``kind`` is
 ``expert`` or ``pre`` (pre-demonstrations), and the trailing version changes whenever the
-bytes of a dataset would. Two families more, for the mazes: ``abco/{maze}-pre-start-v0`` (the
-authors' start-cell pre-demonstrations) and, for 5x5 and 10x10,
-``abco/{maze}-procedural-{kind}-v0``: 10,000 layouts of the procedural split
+bytes of a dataset would. The six environments of the paper's Table 1 come first;
+LunarLander-v3's two (:data:`ADDED_ENVS`) come after every other family, so that no older
+dataset's seed (and bytes) changed when they were added. Two families more, for the mazes:
+``abco/{maze}-pre-start-v0`` (the authors' start-cell pre-demonstrations) and, for 5x5 and
+10x10, ``abco/{maze}-procedural-{kind}-v0``: 10,000 layouts of the procedural split
 (:mod:`abco_envs.maze.procedural`), disjoint from the pool's train and test splits. One for
 Acrobot: ``abco/acrobot-pre-held-v0``, random actions each held for several steps.
 :func:`check_layout_count` checks a number of layouts asked of a maze dataset.
@@ -32,7 +34,8 @@ from abco_data.errors import UnknownDatasetError
 from abco_envs.maze.procedural import PROCEDURAL_SPLIT_SIZE
 
 __all__ = ["DatasetSpec", "DATASET_IDS", "ENV_NAMES", "ACTION_COUNTS", "PROCEDURAL_ENVS",
-           "DATASET_SPLITS", "HELD_ENVS", "dataset_id", "procedural_dataset_id",
+           "DATASET_SPLITS", "HELD_ENVS", "TABLE1_ENVS", "ADDED_ENVS", "dataset_id",
+           "procedural_dataset_id",
            "start_cell_dataset_id",
            "held_dataset_id", "spec", "is_maze", "check_layout_count"]
 
@@ -44,10 +47,18 @@ ENV_NAMES = {
     "CartPole-v1": "cartpole",
     "Acrobot-v1": "acrobot",
     "MountainCar-v0": "mountaincar",
+    "LunarLander-v3": "lunarlander",
 }
+#: The environments of the paper's Table 1, whose expert and pre-demonstration datasets come
+#: first (their seeds follow this order).
+TABLE1_ENVS = ("AbcoMaze3x3-v0", "AbcoMaze5x5-v0", "AbcoMaze10x10-v0", "CartPole-v1",
+               "Acrobot-v1", "MountainCar-v0")
+#: Environments added since: the same two datasets each, made as the classic-control ones
+#: are, after every other family (ids and seeds).
+ADDED_ENVS = ("LunarLander-v3",)
 #: ``n`` of each environment's ``Discrete(n)`` action space (a file claiming another is bad).
 ACTION_COUNTS = {"AbcoMaze3x3-v0": 4, "AbcoMaze5x5-v0": 4, "AbcoMaze10x10-v0": 4,
-                 "CartPole-v1": 2, "Acrobot-v1": 3, "MountainCar-v0": 3}
+                 "CartPole-v1": 2, "Acrobot-v1": 3, "MountainCar-v0": 3, "LunarLander-v3": 4}
 _KIND_SUFFIX = {"expert": "expert", "pre_demonstrations": "pre"}
 VERSION = 0
 
@@ -235,24 +246,31 @@ def held_dataset_id(env_id: str) -> str:
     return _variant_id(env_id, HELD_ENVS, "held-action", "pre-held")
 
 
+def _standard_pair(env_id: str, first: int) -> dict[str, DatasetSpec]:
+    """The expert and pre-demonstration specs of ``env_id``, seeded ``first`` and
+    ``first + 1`` millions."""
+    specs = {}
+    for j, kind in enumerate(("expert", "pre_demonstrations")):
+        if is_maze(env_id):
+            base = _MAZE_EXPERT if kind == "expert" else _MAZE_PRE
+        else:
+            base = _CLASSIC_EXPERT if kind == "expert" else _CLASSIC_PRE
+        # Disjoint seed ranges: 1,000,000 apart per dataset, so episode seeds never meet.
+        params = {**base, "seed": (first + j) * 1_000_000}
+        ds_id = dataset_id(env_id, kind)
+        specs[ds_id] = DatasetSpec(ds_id, env_id, kind, MappingProxyType(params))
+    return specs
+
+
 def _build() -> dict[str, DatasetSpec]:
     specs = {}
-    for i, (env_id, _name) in enumerate(ENV_NAMES.items()):
-        maze = is_maze(env_id)
-        for j, kind in enumerate(("expert", "pre_demonstrations")):
-            if maze:
-                base = _MAZE_EXPERT if kind == "expert" else _MAZE_PRE
-            else:
-                base = _CLASSIC_EXPERT if kind == "expert" else _CLASSIC_PRE
-            # Disjoint seed ranges: 1,000,000 apart per dataset, so episode seeds never meet.
-            params = {**base, "seed": (2 * i + j + 1) * 1_000_000}
-            ds_id = dataset_id(env_id, kind)
-            specs[ds_id] = DatasetSpec(ds_id, env_id, kind, MappingProxyType(params))
-    for k, env_id in enumerate(e for e in ENV_NAMES if is_maze(e)):
-        params = {**_MAZE_PRE_START, "seed": (2 * len(ENV_NAMES) + k + 1) * 1_000_000}
+    for i, env_id in enumerate(TABLE1_ENVS):
+        specs.update(_standard_pair(env_id, 2 * i + 1))
+    for k, env_id in enumerate(e for e in TABLE1_ENVS if is_maze(e)):
+        params = {**_MAZE_PRE_START, "seed": (2 * len(TABLE1_ENVS) + k + 1) * 1_000_000}
         ds_id = start_cell_dataset_id(env_id)
         specs[ds_id] = DatasetSpec(ds_id, env_id, "pre_demonstrations", MappingProxyType(params))
-    first = 2 * len(ENV_NAMES) + 3 + 1  # after the three start-cell datasets
+    first = 2 * len(TABLE1_ENVS) + 3 + 1  # after the three start-cell datasets
     for k, (env_id, kind) in enumerate((e, kind) for e in PROCEDURAL_ENVS
                                        for kind in ("expert", "pre_demonstrations")):
         base = _MAZE_PROCEDURAL_EXPERT if kind == "expert" else _MAZE_PROCEDURAL_PRE
@@ -264,13 +282,17 @@ def _build() -> dict[str, DatasetSpec]:
         params = {**_CLASSIC_PRE_HELD, "seed": (first + k) * 1_000_000}
         ds_id = held_dataset_id(env_id)
         specs[ds_id] = DatasetSpec(ds_id, env_id, "pre_demonstrations", MappingProxyType(params))
+    first += len(HELD_ENVS)  # after the held-action datasets
+    for k, env_id in enumerate(ADDED_ENVS):
+        specs.update(_standard_pair(env_id, first + 2 * k))
     return specs
 
 
 _SPECS = _build()
 #: The dataset ids: the twelve of Table 1 (mazes first, expert before pre-demonstrations),
 #: then the mazes' start-cell pre-demonstrations of the authors' regime, then the procedural
-#: datasets (5x5 expert and pre, 10x10 expert and pre), then the held-action ones (Acrobot).
+#: datasets (5x5 expert and pre, 10x10 expert and pre), then the held-action ones (Acrobot),
+#: then the expert and pre-demonstrations of each added environment (LunarLander).
 DATASET_IDS: tuple[str, ...] = tuple(_SPECS)
 
 

@@ -13,6 +13,10 @@ Two modes:
   frames with the old file's actions;
 - in memory (``in_memory=True``): the columns are read once, up front; for small datasets.
 
+:func:`frames_tensor` gives a trainer's observation column as something it indexes with
+tensors of rows: a tensor sharing an array's memory, or a :class:`FrameTensor` that draws
+:class:`~abco_data.arrays.MazeFrames` a batch at a time.
+
 Example:
     >>> import tempfile, os, torch, abco_data
     >>> path = abco_data.generate("abco/maze3x3-pre-v0", os.path.join(tempfile.mkdtemp(),
@@ -33,11 +37,11 @@ import torch
 from gymnasium import spaces
 from torch.utils.data import Dataset as TorchDataset
 
-from abco_data.arrays import DatasetArrays
+from abco_data.arrays import DatasetArrays, MazeFrames
 from abco_data.format import ACTIONS, FileIdentity, LazyH5File, ObservationReader
 from abco_data.validation import check_observations
 
-__all__ = ["TransitionDataset", "TransitionSource"]
+__all__ = ["TransitionDataset", "TransitionSource", "FrameTensor", "frames_tensor"]
 
 
 class TransitionSource(Protocol):
@@ -137,3 +141,51 @@ class TransitionDataset(TorchDataset):
     def close(self) -> None:
         """Close this process's handle, if open."""
         self._h5.close()
+
+
+class FrameTensor:
+    """:class:`~abco_data.arrays.MazeFrames` indexed like a ``uint8`` tensor of its frames.
+
+    ``view[rows]`` (rows: a CPU integer tensor, an array or an int) is the tensor that
+    ``torch.from_numpy(np.asarray(frames))[rows]`` would give, drawn for those rows only.
+
+    Example:
+        >>> import numpy as np
+        >>> cells = np.full((1, 3, 3), 15, np.uint8)
+        >>> frames, = MazeFrames.draw_columns([(cells, np.array([1]), np.array([[0, 0],
+        ...     [0, 1]]))], height=6, width=6)
+        >>> view = frames_tensor(frames)
+        >>> view.shape, view.dtype, view[torch.tensor([1, 0])].shape
+        (torch.Size([2, 6, 6, 3]), torch.uint8, torch.Size([2, 6, 6, 3]))
+        >>> bool(torch.equal(view[torch.tensor([1])], torch.from_numpy(np.asarray(frames))[[1]]))
+        True
+    """
+
+    def __init__(self, frames: MazeFrames) -> None:
+        self.frames = frames
+
+    @property
+    def shape(self) -> torch.Size:
+        """``(N, H, W, 3)``."""
+        return torch.Size(self.frames.shape)
+
+    @property
+    def dtype(self) -> torch.dtype:
+        """``torch.uint8``."""
+        return torch.uint8
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def __getitem__(self, rows: torch.Tensor | np.ndarray | int) -> torch.Tensor:
+        if isinstance(rows, torch.Tensor):
+            rows = rows.cpu().numpy()
+        return torch.from_numpy(self.frames[rows])
+
+
+def frames_tensor(observations: np.ndarray | MazeFrames) -> torch.Tensor | FrameTensor:
+    """An observation column for indexing with tensors of rows: an array's tensor (sharing
+    its memory) or, for :class:`~abco_data.arrays.MazeFrames`, a :class:`FrameTensor`."""
+    if isinstance(observations, MazeFrames):
+        return FrameTensor(observations)
+    return torch.from_numpy(observations)

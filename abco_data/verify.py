@@ -30,6 +30,8 @@ from abco_data.files import file_digest, sha256_of
 from abco_data.forked_call import run_in_child
 from abco_data.generate import layout_split
 from abco_data.manifest import Manifest, as_manifest, cached_path, known_ids
+from abco_data.user_datasets import user_dataset_file
+from abco_data.user_ids import is_user_id
 from abco_data.validation import MazeColumns, maze_columns
 from abco_envs.maze.procedural import PROCEDURAL_SPLIT_SIZE
 
@@ -132,12 +134,15 @@ def _check_values(ds: Dataset) -> int:
 
 def _resolve(source: str | os.PathLike[str] | Dataset,
              manifest: Manifest) -> tuple[Path, str | None]:
-    """The file to check and the id it must hold (given an id: the cache's copy)."""
+    """The file to check and the id it must hold (given an id: the cache's copy, or a
+    registered user dataset's file)."""
     if isinstance(source, Dataset):
         return source.path, None
     path = Path(source)
     if isinstance(source, str) and not path.exists() and source in known_ids(manifest):
         return cached_path(source, manifest=manifest), source
+    if isinstance(source, str) and not path.exists() and is_user_id(source):
+        return user_dataset_file(source), source  # its size and sha256 checked on the way
     return path, None
 
 
@@ -147,8 +152,9 @@ def check_dataset(source: str | os.PathLike[str] | Dataset, *, kind: str | None 
     """Check a dataset file completely, as one from the cache is checked; return it opened.
 
     Args:
-        source: The file's path, a dataset id (its copy in the abco cache), or an opened
-            :class:`~abco_data.dataset.Dataset` (returned as it is once checked).
+        source: The file's path, a dataset id (its copy in the abco cache, or the file of a
+            registered user dataset), or an opened :class:`~abco_data.dataset.Dataset`
+            (returned as it is once checked).
         kind: The kind it must be (``"expert"`` or ``"pre_demonstrations"``).
         env_id: The environment it must be for, e.g. ``"CartPole-v1"``.
         dataset_id: The dataset id it must hold.
@@ -230,7 +236,8 @@ def verify(source: str | os.PathLike[str], *, sha256: str | None = None,
     """Check every byte and value of a dataset file (see :func:`check_dataset`).
 
     Args:
-        source: The file, or a dataset id (the abco cache's copy).
+        source: The file, or a dataset id (the abco cache's copy, or the file of a
+            registered user dataset).
         sha256: Expected hex sha256; default what :mod:`abco_data.checksum` knows for the
             dataset the file claims to be (the manifest's entry, or the generator's bytes).
         size: Expected size in bytes (with the same default).

@@ -2,7 +2,10 @@
 
 Importing the package registers ``AbcoMaze3x3-v0``, ``AbcoMaze5x5-v0`` and
 ``AbcoMaze10x10-v0`` with Gymnasium (also reachable as ``"abco_envs:AbcoMaze5x5-v0"``). It does
-not import torch or pygame.
+not import torch or pygame. Beside the mazes abco works with Gymnasium's CartPole-v1,
+Acrobot-v1, MountainCar-v0 and LunarLander-v3 (:data:`CLASSIC_IDS`; LunarLander needs the
+``box2d`` extra, :func:`check_env_dependencies`); :data:`SUCCESS_RULES` says when an episode of
+each counts as a success.
 
 Example:
     >>> import gymnasium as gym
@@ -14,10 +17,12 @@ Example:
 
 from gymnasium.envs.registration import register, registry
 
+from abco_envs.dependencies import check_env_dependencies
 from abco_envs.errors import (
     InvalidActionError,
     InvalidLayoutError,
     InvalidOptionError,
+    MissingDependencyError,
     OptionOutOfRangeError,
     UnknownEnvError,
 )
@@ -31,6 +36,7 @@ from abco_envs.maze import (
     procedural_layouts,
 )
 from abco_envs.maze.rules import MAX_EPISODE_STEPS
+from abco_envs.success import SUCCESS_RULES, SuccessRule, is_success, success_mask
 
 __version__ = "0.1.0"
 
@@ -54,12 +60,18 @@ __all__ = [
     "MAZE_SIZES",
     "MazeEnv",
     "MazeVectorEnv",
+    "MissingDependencyError",
     "OptionOutOfRangeError",
+    "SUCCESS_RULES",
+    "SuccessRule",
     "UnknownEnvError",
+    "check_env_dependencies",
     "env_name",
     "fresh_layouts",
     "is_maze",
+    "is_success",
     "layout_pool",
     "maze_size",
     "procedural_layouts",
+    "success_mask",
 ]

@@ -15,10 +15,13 @@ Example:
 
 from __future__ import annotations
 
+from gymnasium.error import DependencyNotInstalled
+
 __all__ = [
     "InvalidActionError",
     "InvalidLayoutError",
     "InvalidOptionError",
+    "MissingDependencyError",
     "OptionOutOfRangeError",
     "UnknownEnvError",
 ]
@@ -43,3 +46,8 @@ class InvalidLayoutError(ValueError):
 
 class UnknownEnvError(ValueError):
     """An env id that abco has no environment or expert for (or that is not a string)."""
+
+
+class MissingDependencyError(DependencyNotInstalled):
+    """An env whose optional dependency is not installed; the message names the abco extra
+    that installs it (a Gymnasium ``DependencyNotInstalled``, as Gymnasium's own)."""

@@ -1,4 +1,4 @@
-"""The env ids abco knows: its registered mazes and the classic-control envs it has experts for.
+"""The env ids abco knows: its registered mazes and the Gymnasium envs it has experts for.
 
 Example:
     >>> maze_size("abco_envs:AbcoMaze5x5-v0")
@@ -19,8 +19,9 @@ __all__ = ["CLASSIC_IDS", "MAZE_IDS", "MAZE_SIZES", "env_name", "maze_size"]
 MAZE_SIZES = (3, 5, 10)
 #: The registered maze ids, smallest first.
 MAZE_IDS = tuple(f"AbcoMaze{n}x{n}-v0" for n in MAZE_SIZES)
-#: Gymnasium's classic-control ids that abco ships experts for.
-CLASSIC_IDS = ("CartPole-v1", "Acrobot-v1", "MountainCar-v0")
+#: Gymnasium's vector-observation ids that abco ships experts for: classic control, then
+#: Box2D's LunarLander (which needs the ``box2d`` extra, :mod:`abco_envs.dependencies`).
+CLASSIC_IDS = ("CartPole-v1", "Acrobot-v1", "MountainCar-v0", "LunarLander-v3")
 
 
 def env_name(env_id: object) -> str:

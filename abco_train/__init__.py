@@ -14,16 +14,9 @@ if TYPE_CHECKING:  # provided lazily by ``__getattr__`` below (it imports torch)
     from abco_train.harness.trained_policy import Policy, load_policy
 
 
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
+from abco_train.harness.code_version import package_version
 
-    try:
-        return version("abco")  # one home for the version: pyproject.toml
-    except PackageNotFoundError:  # a source tree that was never installed
-        return "0+unknown"
-
-
-__version__ = _version()
+__version__ = package_version()
 
 __all__ = ["__version__", "load_policy", "Policy"]
 

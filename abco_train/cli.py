@@ -119,27 +119,18 @@ def _train(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace) -> int:
     from dataclasses import fields
 
-    from abco_train.bench.grid import (
-        CELL_FIELDS,
-        parse_layouts,
-        parse_list,
-        parse_seeds,
-        plan,
-        run_grid,
-    )
+    from abco_train.bench.grid import CELL_FIELDS, run_grid
     from abco_train.config.run import RunConfig
 
     overrides = {f.name: getattr(args, f.name) for f in fields(RunConfig)
                  if f.name not in CELL_FIELDS and getattr(args, f.name, None) is not None}
     threads = {} if args.threads is None else {"threads": args.threads}
     check_fields(RunConfig(**overrides, **threads))  # types and bounds, before the grid's plan
-    layouts = [None] if args.layouts is None else parse_layouts(args.layouts)
-    cells = plan(parse_list(args.envs), parse_list(args.methods), parse_seeds(args.seeds),
-                 layouts)  # fmt: skip
+    track, cells = _bench_plan(args)
     summary = run_grid(
         cells, args.out, overrides=overrides, method_options=_option_flags(args),
         plugins=args.plugin, backend=args.backend, jobs=args.jobs, threads=args.threads,
-        address=args.address, quiet=args.quiet,
+        address=args.address, quiet=args.quiet, track=track,
     )  # fmt: skip
     if summary["failed"]:  # the cells' own lines are above; the one error line says so
         from abco_train.bench.grid import failed_text
@@ -149,12 +140,55 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_plan(args: argparse.Namespace) -> tuple[Any, list[Any]]:
+    """The track (or ``None``) and the cells of ``abco bench``'s command line.
+
+    Raises:
+        ConfigError: Neither or both of --envs and --track, a bad list, an unknown task.
+    """
+    from abco_train.bench.grid import (
+        load_track,
+        parse_layouts,
+        parse_list,
+        parse_seeds,
+        plan,
+        plan_track,
+    )
+
+    if (args.envs is None) == (args.track is None):
+        raise ConfigError("give --envs (a grid of environments) or --track (a grid of tasks)")
+    if args.track is None:
+        if args.tasks is not None:
+            raise ConfigError("--tasks names tasks of a --track")
+        layouts = [None] if args.layouts is None else parse_layouts(args.layouts)
+        seeds = parse_seeds(args.seeds or "0-4")
+        return None, plan(parse_list(args.envs), parse_list(args.methods or ""), seeds, layouts)
+    if args.layouts is not None:
+        raise ConfigError("--layouts is a setting of a track's tasks, not of the grid")
+    track = load_track(args.track)
+    named = {"validation": track.validation_seeds, "test": track.test_seeds}
+    text = named.get(args.seeds or "validation", args.seeds)
+    if not text:
+        raise ConfigError(f"track {track.name} names no {args.seeds} seeds; give them")
+    methods = parse_list(args.methods) if args.methods else list(track.methods)
+    tasks = parse_list(args.tasks) if args.tasks else []
+    return track, plan_track(track, tasks, methods, parse_seeds(text))
+
+
 def _bench_options(parser: argparse.ArgumentParser) -> None:
     from abco_train.bench.backends import BACKENDS
 
-    parser.add_argument("--envs", required=True, help="comma-separated env ids")
-    parser.add_argument("--methods", required=True, help="comma-separated method names")
-    parser.add_argument("--seeds", default="0-4", help="seeds, e.g. 0-4 or 0,2,5 (default 0-4)")
+    parser.add_argument("--envs", default=None, help="comma-separated env ids")
+    parser.add_argument("--track", default=None, metavar="NAME|FILE.toml",
+                        help="a grid of a track's tasks instead of --envs: a built-in track "
+                        "(headline) or a track file; cells in OUT/{task}/{method}/seed{seed}")
+    parser.add_argument("--tasks", default=None,
+                        help="with --track: comma-separated tasks (default: all)")
+    parser.add_argument("--methods", default=None,
+                        help="comma-separated method names (default with --track: its methods)")
+    parser.add_argument("--seeds", default=None,
+                        help="seeds, e.g. 0-4 or 0,2,5 (default 0-4); with --track also "
+                        "'validation' (the default) or 'test', the track's own seeds")
     parser.add_argument("--layouts", default=None, metavar="K[,K...]",
                         help="mazes 5x5/10x10: one cell per number of training layouts, each "
                         "training on the first K layouts of the procedural datasets, in "

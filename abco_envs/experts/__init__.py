@@ -1,5 +1,6 @@
-"""Expert-demo generators: the maze's shortest-path expert, classic-control controllers, the
-random policy of pre-demonstrations, and an episode recorder."""
+"""Expert-demo generators: the maze's shortest-path expert, the classic-control controllers and
+LunarLander's heuristic lander, the random policy of pre-demonstrations, and an episode
+recorder."""
 
 from abco_envs.experts.classic import CONTROLLERS, controller_for
 from abco_envs.experts.maze import MazeExpert
@@ -9,13 +10,15 @@ from abco_envs.ids import MAZE_IDS, env_name
 
 
 def expert_policy(env_id: str, seed: int | None = None) -> Policy:
-    """The expert of any of the six envs as a ``policy(obs, info) -> action``.
+    """The expert of any of the seven envs as a ``policy(obs, info) -> action``.
 
-    Mazes get a :class:`MazeExpert` (ties broken by ``seed``); classic-control ids get their
-    deterministic controller (``seed`` unused).
+    Mazes get a :class:`MazeExpert` (ties broken by ``seed``); the other ids get their
+    deterministic controller (``seed`` unused; LunarLander-v3: Gymnasium's heuristic).
 
     Raises:
         UnknownEnvError: ``env_id`` has no expert (a ``ValueError``).
+        MissingDependencyError: The env needs a package that is not installed (LunarLander:
+            Box2D); the message names the abco extra to install.
     """
     if env_name(env_id) in MAZE_IDS:
         return MazeExpert(seed=seed)

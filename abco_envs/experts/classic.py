@@ -1,4 +1,7 @@
-"""Hand-written, training-free expert controllers for Gymnasium classic-control tasks.
+"""Training-free expert controllers for Gymnasium's classic-control tasks and LunarLander.
+
+CartPole's, Acrobot's and MountainCar's are hand-written here; LunarLander-v3's is Gymnasium's
+own heuristic lander (:mod:`abco_envs.experts.lunar_lander`, with its figures).
 
 Each controller is a pure, deterministic function of the current observation (no hidden
 state, no randomness, no learned weights). The constants were tuned offline by a small
@@ -13,6 +16,7 @@ env id          mean      min    max
 CartPole-v1     500.00    500    500
 MountainCar-v0  -98.67    -112   -83
 Acrobot-v1      -71.75    -109   -62
+LunarLander-v3  252.83    -190   320
 ==============  ========  =====  =====
 
 On 1000 unseen seeds (1000..1999) the figures are similar: CartPole 500 in every episode,
@@ -27,7 +31,9 @@ from collections.abc import Callable
 import gymnasium as gym
 import numpy as np
 
+from abco_envs.dependencies import check_env_dependencies
 from abco_envs.errors import UnknownEnvError
+from abco_envs.experts.lunar_lander import lunar_lander_action
 from abco_envs.ids import env_name
 
 __all__ = [
@@ -129,6 +135,7 @@ CONTROLLERS: dict[str, Callable[[np.ndarray], int]] = {
     "CartPole-v1": cartpole_action,
     "Acrobot-v1": acrobot_action,
     "MountainCar-v0": mountaincar_action,
+    "LunarLander-v3": lunar_lander_action,
 }
 
 
@@ -143,6 +150,8 @@ def controller_for(env_id: str) -> Callable[[np.ndarray], int]:
 
     Raises:
         UnknownEnvError: If no controller exists for ``env_id`` (a ``ValueError``).
+        MissingDependencyError: The env needs a package that is not installed (LunarLander:
+            Box2D); the message names the abco extra to install.
     """
     controller = CONTROLLERS.get(env_name(env_id))
     if controller is None:
@@ -150,6 +159,7 @@ def controller_for(env_id: str) -> Callable[[np.ndarray], int]:
         raise UnknownEnvError(
             f"No classic-control expert for env id {env_id!r}; known ids: {known}"
         )
+    check_env_dependencies(env_id)
     return controller
 
 
@@ -169,6 +179,7 @@ def rollout_returns(env_id: str, episodes: int = 100, seed: int = 0) -> np.ndarr
 
     Raises:
         ValueError: If no controller exists for ``env_id``.
+        MissingDependencyError: The env needs a package that is not installed.
     """
     policy = controller_for(env_id)
     returns = np.zeros(episodes, dtype=np.float64)

@@ -30,12 +30,13 @@ from pathlib import Path
 from typing import Any
 
 from abco_train.bench.records import RecordError, check_name, escape
+from abco_train.bench.tasks import Track
 from abco_train.config.limits import MAX_SEED
 from abco_train.config.run import MAX_LAYOUTS, ConfigError, RunConfig
 from abco_train.methods.registry import options_class
 
 __all__ = ["Cell", "CELL_FIELDS", "MAX_CELLS", "parse_seeds", "parse_list", "parse_layouts",
-           "plan", "cell_config", "check_method_options"]  # fmt: skip
+           "plan", "plan_track", "cell_config", "check_method_options"]  # fmt: skip
 
 #: Config fields the grid sets per cell (never trainer overrides).
 CELL_FIELDS = ("env", "method", "seed", "layouts", "run_dir", "quiet", "threads",
@@ -54,17 +55,25 @@ class Cell:
     method: str
     seed: int
     layouts: int | None = None
+    #: The track's task of the cell (:mod:`abco_train.bench.tasks`), else ``None``.
+    task: str | None = None
 
     @property
     def key(self) -> str:
         """``env/method/seed{seed}`` (``env/method/layouts{K}/seed{seed}`` for a cell that
-        trains on the first K procedural layouts): its run folder under the grid's folder."""
+        trains on the first K procedural layouts; ``task/method/seed{seed}`` for a track's):
+        its run folder under the grid's folder."""
         return str(self.run_dir(Path())).replace(os.sep, "/")
+
+    @property
+    def ident(self) -> tuple[str, str, int, int | None]:
+        """``(task or env, method, seed, layouts)``: what its record must say it is."""
+        return self.task or self.env, self.method, self.seed, self.layouts
 
     def run_dir(self, out: str | os.PathLike[str]) -> Path:
         """The cell's run folder under ``out``."""
-        folder = Path(out) / self.env / self.method
-        if self.layouts is not None:
+        folder = Path(out) / (self.task or self.env) / self.method
+        if self.layouts is not None and self.task is None:  # a task's layouts are its setting
             folder = folder / f"layouts{self.layouts}"
         return folder / f"seed{self.seed}"
 
@@ -163,12 +172,36 @@ def plan(envs: Sequence[str], methods: Sequence[str], seeds: Sequence[int],
             for e in envs for m in methods for k in layouts for s in seeds]  # fmt: skip
 
 
+def plan_track(track: Track, tasks: Sequence[str], methods: Sequence[str],
+               seeds: Sequence[int]) -> list[Cell]:  # fmt: skip
+    """Every (task, method, seed) cell of ``track``, task-major (``tasks``: all when empty).
+
+    Raises:
+        ConfigError: An unknown task, no method or seed, a bad name, too many cells.
+    """
+    chosen = [track.task(name) for name in tasks] if tasks else list(track.tasks)
+    for given, what in ((methods, "--methods"), (seeds, "--seeds")):
+        if not given:
+            raise ConfigError(f"no {what} given: the grid would have no cell")
+    for name in methods:
+        try:
+            check_name(name, "method")
+        except RecordError as exc:
+            raise ConfigError(f"--methods: {exc}") from None
+    n = len(chosen) * len(methods) * len(seeds)
+    if n > MAX_CELLS:
+        raise ConfigError(f"{n:,} cells; a grid holds at most {MAX_CELLS:,}")
+    return [Cell(t.env, m, int(s), t.settings.get("layouts"), t.name)
+            for t in chosen for m in methods for s in seeds]  # fmt: skip
+
+
 def cell_config(
     cell: Cell,
     out: str | os.PathLike[str],
     overrides: dict[str, Any] | None = None,
     threads: int = 1,
     method_options: dict[str, Any] | None = None,
+    track: Track | None = None,
 ) -> dict[str, Any]:
     """The keyword arguments of the cell's :class:`abco_train.config.run.RunConfig`.
 
@@ -181,20 +214,27 @@ def cell_config(
         method_options: Method options for every cell whose method has them (a grid of
             several methods gives each its own; :func:`check_method_options` refuses an
             option that no method of the grid has).
+        track: The track of a task's cell: the task's settings, budget, headline and its
+            options for the cell's method come first.
 
     Raises:
-        ConfigError: An override of a per-cell field (env, method, seed, run_dir, ...).
+        ConfigError: An override of a per-cell field (env, method, seed, run_dir, ...), or of
+            what the cell's task fixes (its budget, headline or a setting).
     """
     overrides = {k: v for k, v in (overrides or {}).items() if v is not None}
     clash = sorted(set(overrides) & set(CELL_FIELDS))
     if clash:
         raise ConfigError(f"the grid sets {', '.join(clash)} per cell; not an override")
+    task = track.task(cell.task).config(cell.method) if track and cell.task else {}
+    clash = sorted(set(overrides) & (set(task) - {"method_options"}))
+    if clash:
+        raise ConfigError(f"task {cell.task} fixes {', '.join(clash)}; not an override")
     settings = {f.name for f in fields(RunConfig)}
     options = {**{k: v for k, v in overrides.items() if k not in settings},
-               **(method_options or {})}  # fmt: skip
+               **task.pop("method_options", {}), **(method_options or {})}  # fmt: skip
     own = options_class(cell.method).names()
     return {
-        **{k: v for k, v in overrides.items() if k in settings},
+        **{k: v for k, v in overrides.items() if k in settings}, **task,
         "env": cell.env, "method": cell.method, "seed": cell.seed,
         **({"layouts": cell.layouts} if cell.layouts is not None else {}),
         "run_dir": str(cell.run_dir(out)), "quiet": True, "threads": int(threads),

@@ -52,6 +52,7 @@ from abco_train.bench.cells import (
     parse_list,
     parse_seeds,
     plan,
+    plan_track,
 )
 from abco_train.bench.lock import grid_lock
 from abco_train.bench.records import RecordError, check_config, check_final, escape, read_json
@@ -65,12 +66,14 @@ from abco_train.bench.results_log import (
     write_log_line,
     write_results,
 )
+from abco_train.bench.tasks import Track, load_track
 from abco_train.config.run import ConfigError, RunConfig
 from abco_train.harness.run_folder import CONFIG, FINAL, config_differences
 from abco_train.methods.registry import available, load_plugins, resolve_config
 
 __all__ = [
-    "Cell", "parse_seeds", "parse_list", "parse_layouts", "plan", "cell_config", "run_cell",
+    "Cell", "parse_seeds", "parse_list", "parse_layouts", "plan", "plan_track", "load_track",
+    "Track", "cell_config", "run_cell",
     "result_row",
     "read_results", "run_grid", "failed_text", "headline", "RESULTS_FILE", "BENCH_LOG",
     "CELL_FIELDS",
@@ -109,6 +112,7 @@ def run_grid(
     threads: int | None = None,
     address: str | None = None,
     quiet: bool = False,
+    track: Track | None = None,
 ) -> dict[str, Any]:
     """Run the unfinished cells of a grid and collect every cell into ``results.jsonl``.
 
@@ -124,6 +128,7 @@ def run_grid(
         threads: Torch threads per cell (default 1, the trainer's, whatever ``jobs``).
         address: Ray cluster to join (``ray`` backend).
         quiet: No progress bar or per-cell lines.
+        track: The track of a grid of task cells (:func:`~abco_train.bench.cells.plan_track`).
 
     Returns:
         A summary: cells, ran, skipped, failed (keys), wall_s, the path of the results (the
@@ -148,7 +153,7 @@ def run_grid(
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {escape(out)} is not a folder")
     out.mkdir(parents=True, exist_ok=True)
-    configs = [cell_config(c, out, overrides, threads, method_options) for c in cells]
+    configs = [cell_config(c, out, overrides, threads, method_options, track) for c in cells]
     with grid_lock(out):
         finished = _finished_cells(cells, configs, out)
         rows = _results_so_far(out, cells, configs, finished)
@@ -244,7 +249,7 @@ def _checked(path: Path, check: Callable[[Any], dict[str, Any]]) -> dict[str, An
 
 
 def _cell_id(cell: Cell) -> tuple[str, str, int, int | None]:
-    return cell.env, cell.method, cell.seed, cell.layouts
+    return cell.ident
 
 
 def _stale(config: dict[str, Any]) -> list[str]:
@@ -349,8 +354,9 @@ def _run_tasks(session: _Session, runner: Iterable[tuple[int, Any]], cells: Sequ
             session.failures[cells[i].key] = why
             bar.write(f"{escape(cells[i].key)}: FAILED, {escape(row['status'])} ({why})")
         elif not quiet:
-            score = headline(row["final"])
-            bar.write(f"{escape(cells[i].key)}: P={score['performance']:.3f} AER={score['aer']:.3f}"
-                      f" in {row['wall_s']:.1f}s")  # fmt: skip
+            block = headline(row["final"])
+            shown = "" if block.get("score") is None else f"score={block['score']:.3f} "
+            bar.write(f"{escape(cells[i].key)}: {shown}P={block['performance']:.3f} "
+                      f"AER={block['aer']:.3f} in {row['wall_s']:.1f}s")  # fmt: skip
         session.log(False)
     bar.close()

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from abco_train.config.limits import MAX_ITERATIONS, MAX_SEED
+from abco_train.config.limits import MAX_BUDGET, MAX_ITERATIONS, MAX_SEED
 from abco_train.config.run import MAX_LAYOUTS
 from abco_train.harness.run_folder import RunFolderError, open_regular
 
@@ -49,6 +49,9 @@ MAX_RECORD_BYTES = 16 * 2**20
 MAX_LOG_BYTES = 2**30
 #: Most actions of a label distribution (abco's envs have 2 to 5; each is a line of a plot).
 MAX_ACTIONS = 64
+#: Most episodes of one evaluation's per-episode lists (ten times the most evaluation
+#: episodes a run may ask for).
+MAX_EPISODE_VALUES = 100_000
 #: Largest integer in a record (interaction counts, seeds): exact as a float.
 MAX_INT = 2**53
 _STATUS = re.compile(r"[A-Za-z0-9_.-]{1,64}")
@@ -307,12 +310,14 @@ def _reference(ref: dict[str, Any]) -> None:
 
 def check_final(final: Any, cell: tuple[str, str, int, int | None] | None = None
                 ) -> dict[str, Any]:  # fmt: skip
-    """A ``final.json``: the cell it belongs to (``cell``, when given, must be it), its status,
-    every number finite, and for a finished run (``status`` ``ok``) at least one evaluation
-    with ``performance`` and ``aer``."""
+    """A ``final.json``: the cell it belongs to (``cell``, when given, must be it: its first
+    part the record's env, or its task), its status, every number finite, and for a finished
+    run (``status`` ``ok``) at least one evaluation with ``performance`` and ``aer``; the
+    benchmark's keys where present (:func:`_check_benchmark_keys`)."""
     final = _object(final)
     found = _cell_fields(final)
-    if cell is not None and found != tuple(cell):
+    task = None if final.get("task") is None else check_name(final["task"], "task")
+    if cell is not None and tuple(cell) not in (found, (task, *found[1:])):
         raise RecordError(f"the record of {_cell_text(found)}, not of {_cell_text(cell)}")
     status = _status(final, "ok")  # records older than the status key: finished
     _all_finite(final, "final")
@@ -323,19 +328,45 @@ def check_final(final: Any, cell: tuple[str, str, int, int | None] | None = None
         _finite(score.get("aer"), f"{escape(key, 40)}.aer")
         if score.get("success_rate") is not None:
             _finite(score["success_rate"], f"{escape(key, 40)}.success_rate")
-        for name in ("episode_returns", "episode_performance"):
+        if score.get("score") is not None:
+            _finite(score["score"], f"{escape(key, 40)}.score")
+        for name in ("episode_returns", "episode_performance", "episode_scores"):
             if score.get(name) is not None:
                 _numbers(score[name], f"{escape(key, 40)}.{name}")
                 if len(score[name]) != score.get("episodes", len(score[name])) or not score[name]:
                     raise RecordError(f"{escape(key, 40)}.{name} does not hold its"
                                       f" {score.get('episodes')} episodes")  # fmt: skip
+                if len(score[name]) > MAX_EPISODE_VALUES:
+                    raise RecordError(f"{escape(key, 40)}.{name} holds more than"
+                                      f" {MAX_EPISODE_VALUES:,} episodes")  # fmt: skip
     if status == "ok" and not evaluations:
         raise RecordError("a finished run's record without any evaluation")
+    _check_benchmark_keys(final, evaluations, status)
     counts = final.get("interactions")
     if counts is not None:
         for kind, n in _object(counts).items():
             _int(n, f"interactions.{escape(kind, 40)}")
     return final
+
+
+def _check_benchmark_keys(final: dict[str, Any], evaluations: dict[str, Any],
+                          status: str) -> None:  # fmt: skip
+    """``budget`` a positive integer, ``seconds`` at least 0, ``headline`` the key of one of
+    the record's evaluations (a finished run's), ``code_version`` two short names."""
+    if final.get("budget") is not None:
+        _int(final["budget"], "budget", 1, MAX_BUDGET)
+    if final.get("seconds") is not None:
+        _finite(final["seconds"], "seconds", 0.0)
+    headline = final.get("headline")
+    if headline is not None and not isinstance(headline, str):
+        raise RecordError("headline is not text")
+    if headline is not None and status == "ok" and headline not in evaluations:
+        raise RecordError(f"headline {escape(headline, 40)!r} is not an evaluation of the record")
+    version = final.get("code_version")
+    good = isinstance(version, dict) and sorted(version) == ["source", "version"] and all(
+        isinstance(v, str) and 0 < len(v) <= 64 and v.isprintable() for v in version.values())
+    if version is not None and not good:
+        raise RecordError("code_version is not {version, source}, each short printable text")
 
 
 def _cell_text(cell: tuple[str, str, int, int | None]) -> str:

@@ -79,6 +79,7 @@ def result_row(config: dict[str, Any], final: dict[str, Any] | None, wall_s: flo
     return {
         "env": config["env"], "method": config["method"], "seed": int(config["seed"]),
         **({"layouts": config["layouts"]} if config.get("layouts") is not None else {}),
+        **({"task": config["task"]} if config.get("task") is not None else {}),
         "run_dir": str(config["run_dir"]), "status": _status(final),
         "final": final, "wall_s": wall_s, "threads": config.get("threads"),
         "reference": _references(config, cached_only) if _status(final) == "done" else None,
@@ -95,7 +96,11 @@ def _status(final: dict[str, Any] | None) -> str:
 
 
 def headline(final: dict[str, Any]) -> dict[str, float]:
-    """The final evaluation of the table: mazes, train split, paper protocol; else episodes."""
+    """The final evaluation of the table: the block the record names as its ``headline``, else
+    (older records) mazes' train split under the paper protocol, or ``episodes``."""
+    named = final.get("headline")
+    if isinstance(named, str) and isinstance(final.get(named), dict):
+        return final[named]
     for key in ("train/paper", "episodes"):
         if key in final:
             return final[key]
@@ -131,7 +136,9 @@ def read_results(out: str | os.PathLike[str], skipped: list[Skipped] | None = No
                                   " line") from None  # fmt: skip
             skipped.append(Skipped(f"{RESULTS_FILE} line {number}", str(exc)))
             continue
-        rows[Cell(env, method, seed, layouts).key] = row
+        task = row.get("task") if isinstance(row, dict) and isinstance(row.get("task"), str) \
+            else None  # fmt: skip
+        rows[Cell(env, method, seed, layouts, task).key] = row
     return rows
 
 

@@ -36,9 +36,11 @@ def procedural_dataset(kind: str) -> Any:
 
 
 #: Defaults of the ``None`` fields by (env kind, preset). Mazes train on 64x64 RGB frames,
-#: classic control on state vectors; ``paper`` is the paper's ResNet-18 and its optimiser;
-#: ``general`` (unseen layouts) reads the maze cell by cell and plans over the cells
-#: (``cellplan``: no weight tied to a position).
+#: classic control (and any other env of vector observations) on state vectors, other image
+#: envs (``image``: any size, e.g. MiniGrid's 7x7x3 symbolic view) on their frames with the
+#: mazes' settings; ``paper`` is the paper's ResNet-18 and its optimiser; ``general`` (unseen
+#: layouts) reads the maze cell by cell and plans over the cells (``cellplan``: no weight
+#: tied to a position).
 DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
     ("maze", "cpu"): {"iterations": 2, "arch": "cnn", "attention": True, "batch_size": 64,
                       "lr": 1e-3},
@@ -50,6 +52,10 @@ DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
                          "lr": 3e-3, "eval_episodes": 100},
     ("classic", "paper"): {"iterations": 2, "arch": "mlp", "attention": True, "batch_size": 32,
                            "lr": 1e-3, "eval_episodes": 100},
+    ("image", "cpu"): {"iterations": 2, "arch": "cnn", "attention": True, "batch_size": 64,
+                       "lr": 1e-3, "eval_episodes": 100},
+    ("image", "paper"): {"iterations": 2, "arch": "resnet18", "attention": True,
+                         "batch_size": 32, "lr": 1e-4, "eval_episodes": 100},
 }  # fmt: skip
 
 #: Per-environment changes on top of :data:`DEFAULTS` (any preset).
@@ -74,4 +80,5 @@ LAYOUT_DEFAULTS: dict[str, Any] = {"expert_data": procedural_dataset("expert"),
 REGIME_DEFAULTS: dict[tuple[str, str], dict[str, Any]] = {
     ("maze", "authors"): {"iterations": 10, "pre_data": start_cell_dataset},
     ("classic", "authors"): {"iterations": 10},
+    ("image", "authors"): {"iterations": 10},
 }

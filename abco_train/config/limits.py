@@ -13,7 +13,7 @@ __all__ = ["MAX_SEED", "MAX_THREADS", "MAX_ITERATIONS", "MAX_BATCH_SIZE", "MAX_P
            "MAX_EXPERT_EPISODES", "MAX_EVAL_EPISODES", "MAX_EVAL_MAX_STEPS", "MAX_PLOT_LAYOUTS",
            "MAX_JOBS", "MAX_PLAY_EPISODES", "MAX_PLAY_STEPS", "MAX_PLAY_FPS",
            "MAX_PLAY_FRAMES", "MAX_EPOCHS", "MAX_STEPS", "MAX_WIDTH", "MAX_ENVS",
-           "MAX_LATENTS"]  # fmt: skip
+           "MAX_LATENTS", "MAX_BUDGET"]  # fmt: skip
 
 # -- the run config (abco train, abco bench) ---------------------------------------------------
 
@@ -66,3 +66,5 @@ MAX_WIDTH = 65_536
 MAX_ENVS = 4_096
 #: Latent actions of ILPO: its forward model predicts every latent's outcome at once.
 MAX_LATENTS = 1_024
+#: Most environment interactions one run may be given (``--budget``).
+MAX_BUDGET = 10_000_000_000

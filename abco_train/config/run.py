@@ -44,9 +44,11 @@ from abco_train.config.defaults import (
     LAYOUT_DEFAULTS,
     REGIME_DEFAULTS,
 )
+from abco_train.config.envs import BUILTIN_ENVS, env_spaces, is_builtin_env, parse_success
 from abco_train.config.fields import ConfigError, add_field_options, check_fields, option
 from abco_train.config.limits import (
     MAX_BATCH_SIZE,
+    MAX_BUDGET,
     MAX_EVAL_EPISODES,
     MAX_EVAL_MAX_STEPS,
     MAX_EXPERT_EPISODES,
@@ -63,6 +65,7 @@ __all__ = [
     "MOVED_TO_METHOD_OPTIONS", "MAX_SEED", "MAX_THREADS", "MAX_ITERATIONS", "MAX_BATCH_SIZE",
     "MAX_PRE_TRANSITIONS", "MAX_EXPERT_EPISODES", "MAX_EVAL_EPISODES", "MAX_EVAL_MAX_STEPS",
     "MAX_PLOT_LAYOUTS", "env_kind", "known_envs", "comparable", "fresh_evaluation",
+    "evaluation_blocks",
     "add_config_options", "config_from_args",
 ]  # fmt: skip
 
@@ -80,7 +83,9 @@ DEVICES = ("auto", "cpu", "cuda")
 IDM_INPUTS = ("difference", "pair")
 #: ``default``: abco's data and schedule; ``authors``: the authors' (see REGIME_DEFAULTS).
 REGIMES = ("default", "authors")
-ARCHS_BY_KIND = {"maze": ("cnn", "resnet18", *CELL_ARCHS), "classic": ("mlp",)}
+#: The networks each env kind takes (:func:`env_kind`).
+ARCHS_BY_KIND = {"maze": ("cnn", "resnet18", *CELL_ARCHS), "classic": ("mlp",),
+                 "image": ("cnn", "resnet18")}
 #: ``--layouts`` trains on the first K of the procedural datasets' layouts (``--eval-layouts``:
 #: no split holds more).
 MAX_LAYOUTS = PROCEDURAL_SPLIT_SIZE
@@ -95,17 +100,23 @@ MOVED_TO_METHOD_OPTIONS = ("idm_input", "idm_epochs", "idm_patience", "idm_valid
 
 
 def env_kind(env_id: str) -> str:
-    """``"maze"`` for the abco mazes, ``"classic"`` for classic control (the defaults' key).
+    """The defaults' key of an env: ``"maze"`` for the abco mazes, ``"classic"`` for vector
+    observations (classic control, LunarLander, and any other env with a ``Box`` vector),
+    ``"image"`` for any other env with ``uint8`` image observations (read from its spaces:
+    :func:`abco_train.config.envs.env_spaces`).
 
     Raises:
-        ConfigError: ``env_id`` is none of the six environments abco trains on.
+        ConfigError: ``env_id`` is not a string, no registered Gymnasium id, or an env whose
+            spaces abco does not learn from (the message says what it takes).
     """
+    if not isinstance(env_id, str):
+        raise ConfigError(f"--env must be an env id, got {env_id!r}")
     name = abco_envs.env_name(env_id)
     if abco_envs.is_maze(name):
         return "maze"
     if name in abco_envs.CLASSIC_IDS:
         return "classic"
-    raise ConfigError(f"unknown env id {env_id!r}; abco trains on: {', '.join(known_envs())}")
+    return env_spaces(env_id).kind
 
 
 def fresh_evaluation(config: RunConfig) -> bool:
@@ -116,9 +127,19 @@ def fresh_evaluation(config: RunConfig) -> bool:
     return bool(config.eval_fresh) if config.eval_fresh is not None else config.layouts is not None
 
 
+def evaluation_blocks(config: RunConfig) -> tuple[str, ...]:
+    """The blocks of ``config``'s final evaluation (``final.json`` keys): mazes
+    ``{train,test[,fresh]}/{paper,standard}``, other envs ``episodes``."""
+    if env_kind(config.env) != "maze":
+        return ("episodes",)
+    splits = ("train", "test", "fresh") if fresh_evaluation(config) else ("train", "test")
+    return tuple(f"{s}/{p}" for s in splits for p in PROTOCOLS)
+
+
 def known_envs() -> tuple[str, ...]:
-    """The environments abco trains on."""
-    return (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
+    """The environments abco ships datasets for (it trains on any registered Gymnasium env
+    with ``Box`` observations and ``Discrete`` actions, given datasets: :func:`env_kind`)."""
+    return BUILTIN_ENVS
 
 
 @dataclass
@@ -129,7 +150,10 @@ class RunConfig:
     """
 
     env: str = option("environment id: AbcoMaze3x3/5x5/10x10-v0, CartPole-v1, Acrobot-v1, "
-                      "MountainCar-v0", "AbcoMaze5x5-v0")  # fmt: skip
+                      "MountainCar-v0, LunarLander-v3 (extra box2d), or any registered "
+                      "Gymnasium id with Box observations and Discrete actions (module:Id-v0 "
+                      "imports module first; give --expert-data and --pre-data)",
+                      "AbcoMaze5x5-v0")  # fmt: skip
     method: str = option("a registered method: bc, bco, bco-alpha, abco, attention, "
                          "sampling-partial, sampling-whole, abco-whole, or a plugin's", "abco")
     seed: int = option("seed of everything (same seed, same CPU run)", 0, min=0,
@@ -163,6 +187,10 @@ class RunConfig:
                                      "in no dataset (default: on with --layouts, else off)")
     protocol: str = option("maze evaluation protocol while training: paper (4th visit of a cell "
                            "ends, return -1) or standard", "paper", choices=PROTOCOLS)
+    success: str | None = option("when an evaluation episode counts as a success, where the "
+                                 "env's info reports no is_success: terminated, return>=X or "
+                                 "steps>=N (default: the built-in env's rule; other envs: "
+                                 "terminated)")
     eval_max_steps: int | None = option("cap on evaluation episode length (default: the env's)",
                                         min=1, max=MAX_EVAL_MAX_STEPS)  # fmt: skip
     expert_data: str | None = option("expert dataset id or HDF5 file (default: the env's)")
@@ -179,6 +207,15 @@ class RunConfig:
     plot_layouts: int = option("mazes: layouts whose paths are drawn", 4, min=0,
                                max=MAX_PLOT_LAYOUTS)
     plots: bool = option("draw the figures at the end", True)
+    task: str | None = option("the benchmark task this run is a cell of (set by abco bench from "
+                              "a task file; recorded in final.json)")
+    budget: int | None = option("environment interactions the run may spend, all kinds summed "
+                                "(pre- and post-demonstrations, RL, remapping); training stops "
+                                "when it is spent (default: no cap)", min=1,
+                                max=MAX_BUDGET)  # fmt: skip
+    headline: str | None = option("the final evaluation block the run is ranked by, e.g. "
+                                  "test/paper or episodes (default: train/paper for mazes, "
+                                  "episodes for other envs)")
     method_options: dict[str, Any] = field(
         default_factory=dict,
         metadata={"help": "JSON object of the method's options (abco train --method M --help "
@@ -221,8 +258,9 @@ class RunConfig:
         if self.arch is not None and self.arch in ARCHS and self.arch not in ARCHS_BY_KIND[kind]:
             raise ConfigError(f"--arch {self.arch} does not fit {self.env}'s observations; use "
                               f"{' or '.join(ARCHS_BY_KIND[kind])}")  # fmt: skip
-        if kind == "classic" and self.eval_fresh:
-            raise ConfigError("--eval-fresh is for mazes: classic control has no layouts")
+        if kind != "maze" and self.eval_fresh:
+            raise ConfigError(f"--eval-fresh is for mazes: {self.env} has no layouts")
+        _check_datasets(self)
         if self.layouts is not None and abco_envs.env_name(self.env) not in PROCEDURAL_ENVS:
             raise ConfigError(f"--layouts needs a maze with procedural datasets "
                               f"({' or '.join(PROCEDURAL_ENVS)}), got --env {self.env}"
@@ -236,6 +274,12 @@ class RunConfig:
                               "start-cell walks, 100 layouts); with --layouts give --pre-data "
                               "too, or use --regime default")  # fmt: skip
         check_fields(self)
+        if self.success is not None:
+            parse_success(self.success)
+        if self.headline is not None and self.headline not in evaluation_blocks(self):
+            raise ConfigError(f"--headline must be one of the final evaluation's blocks "
+                              f"({', '.join(evaluation_blocks(self))}), got "
+                              f"{self.headline[:60]!r}")  # fmt: skip
         return self
 
     def to_json(self) -> str:
@@ -245,6 +289,32 @@ class RunConfig:
     def replace(self, **changes: Any) -> RunConfig:
         """A copy with some fields changed."""
         return replace(self, **changes)
+
+
+def _check_datasets(config: RunConfig) -> None:
+    """An env beyond the built-in ones has no datasets of abco's: the run names its own, and
+    evaluates under the step limit they were recorded with.
+
+    Raises:
+        ConfigError: ``--expert-data`` or ``--pre-data`` missing for such an env, or
+            ``--eval-max-steps`` given.
+    """
+    missing = [(flag, kind) for flag, kind, given in (
+        ("--expert-data", "expert", config.expert_data), ("--pre-data", "pre", config.pre_data))
+        if given is None]  # fmt: skip
+    if is_builtin_env(config.env):
+        return
+    if missing:
+        flag, kind = missing[0]
+        raise ConfigError(
+            f"{config.env} has no built-in {kind} dataset: record one with abco data record "
+            f"--env {config.env} --kind {kind} ... --id local/NAME-v0 and give it as {flag} "
+            "(see 'Your own datasets' in docs/datasets.md)")
+    if config.eval_max_steps is not None:  # the score's references: the dataset's, uncut
+        raise ConfigError(
+            f"--eval-max-steps is for the built-in envs: {config.env}'s score references are "
+            "its expert dataset's, measured under the env's own step limit; record the "
+            "datasets with abco data record --max-episode-steps N to change that limit")
 
 
 #: Settings that may differ between a run and its resumption (and between a finished grid

@@ -21,12 +21,14 @@ import numpy as np
 import abco_data
 import abco_envs
 from abco_train.config.run import RunConfig, fresh_evaluation
+from abco_train.harness.code_version import code_version
 from abco_train.harness.rollouts import rollout, score
+from abco_train.harness.score_reference import layout_cells, score_reference
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method
 
-__all__ = ["episodes", "final_evaluation", "format_table", "fresh_set", "EVAL_SEED",
-           "FINAL_SEED", "FRESH_LAYOUTS", "FRESH_SEED"]  # fmt: skip
+__all__ = ["episodes", "final_evaluation", "format_table", "fresh_set", "headline_block",
+           "EVAL_SEED", "FINAL_SEED", "FRESH_LAYOUTS", "FRESH_SEED"]  # fmt: skip
 
 EVAL_SEED = 100_000_000
 FINAL_SEED = 200_000_000
@@ -87,6 +89,7 @@ def final_evaluation(
         [(s, p) for s in splits for p in ("paper", "standard")] if maze else
         [("episodes", "standard")]
     )  # fmt: skip
+    results.update(_benchmark_keys(cfg, maze))
     figures = {}
     for split, protocol in settings:
         is_fresh = split == "fresh"
@@ -94,7 +97,9 @@ def final_evaluation(
                        **episodes(cfg, data, "train" if split == "episodes" else split,
                                       FINAL_SEED, fresh if is_fresh else None))  # fmt: skip
         key = split if not maze else f"{split}/{protocol}"
-        results[key] = score(roll, fresh_ref if is_fresh else data.reference, per_episode=True)
+        cells = layout_cells(cfg, data, split, fresh if is_fresh else None) if maze else None
+        results[key] = score(roll, fresh_ref if is_fresh else data.reference, per_episode=True,
+                             score_reference=score_reference(cfg, data, protocol, cells))
         if cfg.plots and maze and protocol == cfg.protocol and roll.paths is not None:
             k = min(cfg.plot_layouts, len(roll.paths))
             shown = (fresh if is_fresh else data.train_layouts if split == "train" else None)
@@ -114,6 +119,20 @@ def final_evaluation(
     return results
 
 
+def headline_block(cfg: RunConfig, maze: bool) -> str:
+    """The block a run is ranked by: ``cfg.headline``, else ``train/{protocol}`` (mazes: the
+    paper's setting, the layouts trained on) or ``episodes``."""
+    if cfg.headline is not None:
+        return cfg.headline
+    return f"train/{cfg.protocol}" if maze else "episodes"
+
+
+def _benchmark_keys(cfg: RunConfig, maze: bool) -> dict[str, Any]:
+    """``task``, ``budget``, ``headline`` and ``code_version`` of the final record."""
+    return {"task": cfg.task, "budget": cfg.budget, "headline": headline_block(cfg, maze),
+            "code_version": code_version()}  # fmt: skip
+
+
 def format_table(final: dict[str, Any]) -> str:
     """The final evaluation as a text table (a failed run: its status and message)."""
     run = f"{final.get('method')} on {final.get('env')} (seed {final.get('seed')})"
@@ -122,10 +141,12 @@ def format_table(final: dict[str, Any]) -> str:
                 f"{final.get('message')}")  # fmt: skip
     rows = [(k, v) for k, v in final.items() if isinstance(v, dict) and "performance" in v]
     lines = [run,
-             f"{'evaluation':<18}{'P':>8}{'AER':>10}{'success':>9}{'episodes':>10}"]
+             f"{'evaluation':<18}{'score':>8}{'P':>8}{'AER':>10}{'success':>9}{'episodes':>10}"]
     for key, m in rows:
-        lines.append(f"{key:<18}{m['performance']:>8.3f}{m['aer']:>10.3f}"
-                     f"{m['success_rate']:>9.2f}{m['episodes']:>10d}")
+        shown = f"{m['score']:>8.3f}" if "score" in m else f"{'-':>8}"
+        mark = " *" if key == final.get("headline") else ""
+        lines.append(f"{key:<18}{shown}{m['performance']:>8.3f}{m['aer']:>10.3f}"
+                     f"{m['success_rate']:>9.2f}{m['episodes']:>10d}{mark}")
     for name, path in final.get("figures", {}).items():
         lines.append(f"plot {name}: {path}")
     return "\n".join(lines)

@@ -9,6 +9,13 @@ A run holds its folder's lock (:func:`abco_train.harness.run_lock.run_folder_loc
 start to end: a second writer of the folder is refused at once. Every file is written whole
 or not at all: a full disk or a read-only folder ends the run with an ``OSError`` naming the
 file, the previous checkpoint, metrics and plots intact.
+
+A run with a ``--budget`` spends at most that many environment interactions
+(:meth:`~abco_train.methods.base.Method.count`): the rollouts a method learns from are cut at
+its :attr:`~abco_train.methods.base.Method.budget_left` steps (the evaluation itself is never
+cut), and training stops, to the final evaluation, after the iteration that had nothing left
+to spend (``"stopped": "budget"`` in its metrics and in ``final.json``). A method that counts
+past its budget anyway ends the run with status ``over_budget``.
 """
 
 from __future__ import annotations
@@ -21,10 +28,13 @@ from typing import Any
 
 import numpy as np
 
+import abco_envs
+from abco_train.config.envs import use_success_rule
 from abco_train.config.run import RunConfig
 from abco_train.harness.checkpoint import load_checkpoint, restore, save_checkpoint
+from abco_train.harness.code_version import code_version
 from abco_train.harness.evaluation import EVAL_SEED, episodes, final_evaluation
-from abco_train.harness.rollouts import rollout, score
+from abco_train.harness.rollouts import Rollouts, rollout, score
 from abco_train.harness.run_folder import (
     CHECKPOINT,
     CONFIG,
@@ -41,7 +51,7 @@ from abco_train.harness.run_folder import (
 from abco_train.harness.run_lock import run_folder_lock
 from abco_train.harness.runtime import resolve_device, seed_everything
 from abco_train.harness.training_data import TrainingData, load_training_data
-from abco_train.methods.base import Method, TrainingFailed
+from abco_train.methods.base import INTERACTION_KINDS, BudgetExceeded, Method, TrainingFailed
 from abco_train.methods.registry import get_method, identity, resolve_config
 
 __all__ = ["train"]
@@ -60,6 +70,8 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
 
     Raises:
         ConfigError: A bad setting, env or method.
+        MissingDependencyError: The env needs a package that is not installed (LunarLander:
+            Box2D); the message names the abco extra to install.
         RunFolderError: The run folder is no folder, holds a checkpoint of a different config
             or damaged files, or is in use by another process
             (:class:`~abco_train.harness.run_lock.RunFolderInUseError`).
@@ -73,6 +85,8 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
     stored = finished_result(run_dir, asdict(cfg))  # read only: a read-only folder answers
     if stored is not None:
         return stored
+    abco_envs.check_env_dependencies(cfg.env)  # LunarLander without Box2D: the extra, in a line
+    use_success_rule(cfg.env, cfg.success)  # --success, or terminated for an env of the user's
     with run_folder_lock(run_dir, "abco train"):
         return _train(cfg, run_dir, stop_after)
 
@@ -89,7 +103,11 @@ def _train(cfg: RunConfig, run_dir: Path, stop_after: int | None) -> dict[str, A
     # -- seeding, data, method --------------------------------------------------------------
     rng = seed_everything(cfg.seed, cfg.threads, cfg.deterministic)
     data = load_training_data(cfg)
-    method = get_method(cfg.method)(cfg, data, rng)
+    try:
+        method = get_method(cfg.method)(cfg, data, rng)
+    except BudgetExceeded as exc:  # a method that counts past the budget as it starts
+        return _failed(cfg, run_dir, 0, _over_budget(exc), [],
+                       dict.fromkeys(INTERACTION_KINDS, 0))  # fmt: skip
     start = 0 if state is None else restore(method, state, cfg, run_dir / CHECKPOINT)
     history = _read_history(run_dir / METRICS, start, data.n_actions) if start else []
     if history:
@@ -99,27 +117,47 @@ def _train(cfg: RunConfig, run_dir: Path, stop_after: int | None) -> dict[str, A
 
     # -- iterations -------------------------------------------------------------------------
     total = method.num_iterations
-    bar = progress_bar(range(start, total), total=total, initial=start,
+    end = start if _stop(history) else total  # a resumed run that had stopped for its budget
+    bar = progress_bar(range(start, end), total=total, initial=start,
                        desc=f"{cfg.method} {cfg.env}", disable=cfg.quiet, unit="iter")
     for i in bar:
         try:
             record = _iteration(method, cfg, data, i)
-        except TrainingFailed as failure:  # never a normal-looking result
+        except (TrainingFailed, BudgetExceeded) as failure:  # never a normal-looking result
             bar.close()
+            if isinstance(failure, BudgetExceeded):
+                failure = _over_budget(failure)
             return _failed(cfg, run_dir, i, failure, history, dict(method.interactions))
         history.append(record)
         _write_history(run_dir, history)
         save_checkpoint(run_dir / CHECKPOINT, i, method, cfg)
         bar.set_postfix(P=f"{record['eval']['performance']:.3f}",
                         win=f"{record['eval']['success_rate']:.2f}")  # fmt: skip
+        if "stopped" in record:
+            break
         if stop_after is not None and i + 1 >= stop_after and i + 1 < total:
             bar.close()
             return None
     bar.close()
 
     final = final_evaluation(cfg, data, method, history, run_dir)
+    final.update(_stop(history))
     write_atomic(run_dir / FINAL, json.dumps(final, indent=2))
     return final
+
+
+def _stop(history: list[dict[str, Any]]) -> dict[str, Any]:
+    """Why and after which iteration training stopped early (``final.json``'s ``stopped``,
+    ``stopped_after``), from the last iteration's record; empty when it ran to the end."""
+    if not history or "stopped" not in history[-1]:
+        return {}
+    return {"stopped": history[-1]["stopped"], "stopped_after": history[-1]["iteration"]}
+
+
+def _over_budget(exc: BudgetExceeded) -> TrainingFailed:
+    """The failure (status ``over_budget``) that ends a run whose method counted past its
+    ``--budget``."""
+    return TrainingFailed("over_budget", str(exc))
 
 
 def _open_run_folder(run_dir: Path, cfg: RunConfig) -> dict[str, Any] | None:
@@ -149,25 +187,52 @@ def _iteration(method: Method, cfg: RunConfig, data: TrainingData, i: int) -> di
     """Iteration ``i``: train, evaluate on the training episodes, hand the post-demonstrations
     to the method; its metrics record.
 
+    With a ``--budget``, the rollouts the method learns from are cut at its
+    :attr:`~abco_train.methods.base.Method.budget_left` steps (none at all when nothing is
+    left), and the record says what is left (``budget_left``) and, after the iteration that
+    had nothing left to spend while iterations remained, ``"stopped": "budget"``.
+
     Raises:
         TrainingFailed: The method's health check failed.
+        BudgetExceeded: The method counted past the run's budget.
     """
     t0 = time.perf_counter()
     stats = method.train_iteration(i)
     t_train = time.perf_counter() - t0
     kwargs = episodes(cfg, data, "train", EVAL_SEED)
-    roll = rollout(method.act, cfg.env, protocol=cfg.protocol, record=not method.explores,
-                   **kwargs)  # fmt: skip
+    # The most steps the runs it learns from may take (None: no budget, or it learns from
+    # none, as bc and bco: their evaluation is no interaction and is not cut).
+    cap = method.budget_left if method.learns_from_rollouts(i) else None
+    explores = method.explores
+    roll = rollout(method.act, cfg.env, protocol=cfg.protocol, record=not explores,
+                   max_total_steps=None if explores else cap or None, **kwargs)  # fmt: skip
     evaluation = score(roll, data.reference)
-    if method.explores:  # post-demonstrations of its own: the same episodes, explored
-        roll = rollout(method.explore, cfg.env, protocol=cfg.protocol, record=True, **kwargs)
-    post = method.observe(i, roll)
-    return {
+    learned: Rollouts | None = roll
+    if cap == 0:  # the budget is spent: no post-demonstrations
+        learned = None
+    elif explores:  # post-demonstrations of its own: the same episodes, explored
+        learned = rollout(method.explore, cfg.env, protocol=cfg.protocol, record=True,
+                          max_total_steps=cap, **kwargs)  # fmt: skip
+    elif roll.budget_cut is not None and roll.budget_cut.any():  # the evaluation, uncut
+        evaluation = score(rollout(method.act, cfg.env, protocol=cfg.protocol, **kwargs),
+                           data.reference)  # fmt: skip
+    spent = method.spent
+    post = {} if learned is None else method.observe(i, learned)
+    record = {
         "iteration": i, "train": stats, "eval": evaluation, "post": post,
         "label_distribution": _label_distribution(method.expert_labels(), data.n_actions),
         "interactions": dict(method.interactions),
         "seconds_train": t_train, "seconds": time.perf_counter() - t0,
     }  # fmt: skip
+    if cfg.budget is not None:
+        record["budget_left"] = method.budget_left
+        if learned is not None and learned.budget_cut is not None:
+            record["budget_cut_runs"] = int(learned.budget_cut.sum())
+        # Post-demonstrations counted now feed the next iteration; without them, and with
+        # nothing left to spend, more iterations would only repeat this one's training.
+        if method.budget_left == 0 and method.spent == spent and i + 1 < method.num_iterations:
+            record["stopped"] = "budget"
+    return record
 
 
 def _label_distribution(labels: np.ndarray | None, n_actions: int) -> list[float] | None:
@@ -184,8 +249,11 @@ def _failed(
     failure's status and message and no evaluation (nothing to average by mistake)."""
     record = {"iteration": iteration, "train": failure.stats, "status": failure.status}
     _write_history(run_dir, [*history, record])
-    final = {"env": cfg.env, "method": cfg.method, "seed": cfg.seed, "status": failure.status,
-             "message": str(failure), "iteration": iteration, "interactions": interactions,
+    final = {"env": cfg.env, "method": cfg.method, "seed": cfg.seed,
+             **({"layouts": cfg.layouts} if cfg.layouts is not None else {}),
+             "task": cfg.task, "budget": cfg.budget, "code_version": code_version(),
+             "status": failure.status, "message": str(failure), "iteration": iteration,
+             "interactions": interactions,
              "seconds": float(sum(h["seconds"] for h in history))}  # fmt: skip
     write_atomic(run_dir / FINAL, json.dumps(final, indent=2))
     return final

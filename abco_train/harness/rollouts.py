@@ -17,8 +17,10 @@ Protocols (mazes):
 
 Classic control always uses the env's rules; ``paper`` changes nothing there.
 
-Goals (``v_e``): maze, the goal cell reached (terminated); CartPole, 195 steps survived;
-MountainCar and Acrobot, the env's own termination.
+Goals (``v_e``): each env's rule in :data:`abco_envs.SUCCESS_RULES` (maze, the goal cell
+reached; CartPole, 195 steps survived; MountainCar and Acrobot, the env's own termination;
+LunarLander, a return of at least 200 at the end of the episode; an env whose ``info`` reports
+``is_success``, that).
 """
 
 from __future__ import annotations
@@ -31,17 +33,16 @@ import gymnasium as gym
 import numpy as np
 
 import abco_envs
+from abco_data.reference import PAPER_FAIL_RETURN, PAPER_MAX_VISITS
 from abco_train.config.run import PROTOCOLS, env_kind
 from abco_train.harness.metrics import performance, summarize
 
 __all__ = ["PROTOCOLS", "Rollouts", "rollout", "score", "CARTPOLE_GOAL_STEPS"]
 
 
-CARTPOLE_GOAL_STEPS = 195
-PAPER_MAX_VISITS = 4
-PAPER_FAIL_RETURN = -1.0
+CARTPOLE_GOAL_STEPS = int(abco_envs.SUCCESS_RULES["CartPole-v1"].threshold)
 
-ActFn = Callable[[np.ndarray], np.ndarray]
+ActFn = Callable[..., np.ndarray]  # (obs) -> actions; with ``reads_info``: (obs, info)
 
 
 @dataclass
@@ -59,6 +60,7 @@ class Rollouts:
         obs_t: With ``record``: row of ``s_t`` of each transition in ``observations``.
         run_ids: With ``record``: run of each transition.
         paths: Mazes: each run's ``(T_e + 1, 2)`` cells.
+        budget_cut: With ``max_total_steps``: ``(E,)`` the runs it ended unfinished.
     """
 
     returns: np.ndarray
@@ -71,6 +73,7 @@ class Rollouts:
     obs_t: np.ndarray | None = None
     run_ids: np.ndarray | None = None
     paths: list[np.ndarray] | None = None
+    budget_cut: np.ndarray | None = None
 
     @property
     def win_rate(self) -> float:
@@ -99,11 +102,14 @@ def rollout(
     record: bool = False,
     max_steps: int | None = None,
     layouts: np.ndarray | None = None,
+    max_total_steps: int | None = None,
 ) -> Rollouts:
     """Run ``act`` on a batch of episodes, one policy call per step for all of them.
 
     Args:
-        act: Batched greedy policy: ``(B, *obs_shape)`` observations -> ``(B,)`` actions.
+        act: Batched greedy policy: ``(B, *obs_shape)`` observations -> ``(B,)`` actions; one
+            with a true ``reads_info`` attribute is called ``act(obs, info)`` with the
+            episodes' per-episode ``info`` entries too (a reference policy: the expert).
         env_id: Gymnasium id.
         episodes: Mazes: evaluate the first ``episodes`` layouts of ``split`` or of
             ``layouts`` (default: all); classic control: number of episodes (default 100).
@@ -116,19 +122,34 @@ def rollout(
             after this many steps; default the env's own limit.
         layouts: Mazes: ``(k, n, n)`` layouts to evaluate on, one episode each (the
             ``layout`` reset option), instead of a split's; their ``layout_indices`` are -1.
+        max_total_steps: Stop the batch when its episodes' steps add up to this many (a
+            learner's interaction budget, at least 1): the runs still going end there
+            (``budget_cut``), unsuccessful unless their goal was already reached; where fewer
+            steps are left than runs going, the runs of lower index take them.
     """
     if protocol not in PROTOCOLS:
         raise ValueError(f"unknown protocol {protocol!r}; expected one of {PROTOCOLS}")
+    if max_total_steps is not None and max_total_steps < 1:
+        raise ValueError(f"max_total_steps must be at least 1, got {max_total_steps}")
     num, kwargs, options = _episodes(env_id, episodes, split, env_kwargs, layouts)
     envs = make_vector_env(env_id, num, kwargs)
+    reads_info = bool(getattr(act, "reads_info", False))  # a reference policy (the expert)
     obs, info = envs.reset(seed=seed, options=options or None)
     tally = _Tally.start(env_id, num, info, paper=protocol == "paper")
     first_obs = obs.copy() if record else None
     steps: list[tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray | None]] = []
+    cut = np.zeros(num, dtype=bool)
     while not tally.done.all():
         active = np.flatnonzero(~tally.done)
+        if max_total_steps is not None:  # the steps left go to the runs of lower index
+            left = max(0, max_total_steps - int(tally.lengths.sum()))
+            cut[active[left:]] = tally.done[active[left:]] = True
+            active = active[:left]
+            if not len(active):
+                break
         actions = np.zeros(num, dtype=np.int64)
-        actions[active] = np.asarray(act(obs[active])).reshape(-1)
+        chosen = act(obs[active], _rows(info, active, num)) if reads_info else act(obs[active])
+        actions[active] = np.asarray(chosen).reshape(-1)
         obs, rewards, terminated, truncated, info = envs.step(actions)
         ended = tally.step(active, rewards, terminated, truncated, info, max_steps)
         steps.append((
@@ -139,7 +160,9 @@ def rollout(
         ))  # fmt: skip
         tally.done[active[ended]] = True
     envs.close()
-    return _collect(tally, first_obs, steps)
+    out = _collect(tally, first_obs, steps)
+    out.budget_cut = cut if max_total_steps is not None else None
+    return out
 
 
 def _episodes(
@@ -202,21 +225,22 @@ class _Tally:
         self.returns[active] += rewards[active]
         self.lengths[active] += 1
         ended = (terminated | truncated)[active]
-        if self.maze:
-            self.successes[active] = terminated[active]
-            if self.paper and self.visits is not None:
-                pos = info["position"][active]
-                cells = pos[:, 0] * self.n + pos[:, 1]
-                self.visits[active, cells] += 1
-                looped = (self.visits[active, cells] >= PAPER_MAX_VISITS) & ~terminated[active]
-                self.returns[active[looped]] = PAPER_FAIL_RETURN
-                ended |= looped
-        elif self.env_name == "CartPole-v1":
-            self.successes[active] = self.lengths[active] >= CARTPOLE_GOAL_STEPS
-        else:
-            self.successes[active] = terminated[active]
+        if self.maze and self.paper and self.visits is not None:
+            pos = info["position"][active]
+            cells = pos[:, 0] * self.n + pos[:, 1]
+            self.visits[active, cells] += 1
+            looped = (self.visits[active, cells] >= PAPER_MAX_VISITS) & ~terminated[active]
+            self.returns[active[looped]] = PAPER_FAIL_RETURN
+            ended |= looped
         if max_steps is not None:
             ended |= self.lengths[active] >= max_steps
+        # The env's rule (abco_envs.success), after every step: a return rule (LunarLander)
+        # reads the return once the episode has ended, so `ended` must be final here.
+        reported = {k: np.asarray(info[k])[active] for k in ("is_success", "_is_success")
+                    if k in info}  # fmt: skip
+        self.successes[active] = abco_envs.success_mask(
+            self.env_name, terminated=terminated[active], lengths=self.lengths[active],
+            returns=self.returns[active], ended=ended, info=reported)
         return ended
 
 
@@ -241,6 +265,12 @@ def _collect(tally: _Tally, first_obs: np.ndarray | None,
     return out
 
 
+def _rows(info: dict[str, Any], active: np.ndarray, num: int) -> dict[str, Any]:
+    """The ``active`` episodes' entries of a vector env's ``info`` (per-episode arrays only)."""
+    return {k: v[active] for k, v in info.items()
+            if isinstance(v, np.ndarray) and v.shape[:1] == (num,)}  # fmt: skip
+
+
 def _recorded(rows: np.ndarray | None) -> np.ndarray:
     """A step's recorded rows: positions (mazes) and observations (``record``) are kept at
     every step of a rollout that keeps them at all."""
@@ -262,28 +292,49 @@ def _per_run(
     return [np.concatenate([first[e : e + 1], g]) for e, g in enumerate(grouped)]
 
 
-def score(rollouts: Rollouts, reference: Any, per_episode: bool = False) -> dict[str, Any]:
-    """AER, ``P`` (per episode against its own references, then averaged) and success rate.
-
-    Args:
-        rollouts: The episodes.
-        reference: A :class:`abco_data.ReferenceReturns` (per layout for mazes).
-        per_episode: Also list every episode's return and ``P`` (``episode_returns``,
-            ``episode_performance``), for confidence intervals over episodes.
-    """
+def _references(rollouts: Rollouts, reference: Any) -> tuple[Any, Any]:
+    """The expert and random reference returns of each episode (mazes: of its layout)."""
     if rollouts.layout_ids is not None and reference.layout_ids is not None:
         where = {lid: i for i, lid in enumerate(reference.layout_ids)}
         missing = [lid for lid in rollouts.layout_ids if lid not in where]
         if missing:
             raise KeyError(f"no reference returns for layouts {missing[:3]}...")
         idx = np.array([where[lid] for lid in rollouts.layout_ids])
-        expert = np.asarray(reference.expert_per_layout)[idx]
-        random = np.asarray(reference.random_per_layout)[idx]
-    else:
-        expert, random = reference.expert_mean, reference.random_mean
+        return (np.asarray(reference.expert_per_layout)[idx],
+                np.asarray(reference.random_per_layout)[idx])  # fmt: skip
+    return reference.expert_mean, reference.random_mean
+
+
+def score(rollouts: Rollouts, reference: Any, per_episode: bool = False,
+          score_reference: Any = None) -> dict[str, Any]:  # fmt: skip
+    """AER, ``P`` (per episode against its own references, then averaged), success rate and,
+    with ``score_reference``, the normalised score.
+
+    Args:
+        rollouts: The episodes.
+        reference: The paper's ``P`` references, a :class:`abco_data.ReferenceReturns` (per
+            layout for mazes).
+        per_episode: Also list every episode's return and ``P`` (``episode_returns``,
+            ``episode_performance``, and ``episode_scores`` with ``score_reference``), for
+            confidence intervals over episodes.
+        score_reference: References measured under the evaluation's own protocol
+            (:mod:`abco_train.harness.score_reference`): adds ``score``, the mean over
+            episodes of ``(R - random) / (expert - random)`` (``None`` where the two
+            references coincide, e.g. a step cap no expert finishes within).
+    """
+    expert, random = _references(rollouts, reference)
     out: dict[str, Any] = summarize(rollouts.returns, rollouts.successes, expert, random)
     out["mean_length"] = float(rollouts.lengths.mean())
+    scores = None
+    if score_reference is not None:
+        try:
+            scores = performance(rollouts.returns, *_references(rollouts, score_reference))
+            out["score"] = float(scores.mean())
+        except ValueError:  # the expert does no better than random under this protocol
+            out["score"] = None
     if per_episode:
         out["episode_returns"] = np.asarray(rollouts.returns, dtype=np.float64).tolist()
         out["episode_performance"] = performance(rollouts.returns, expert, random).tolist()
+        if scores is not None:
+            out["episode_scores"] = scores.tolist()
     return out

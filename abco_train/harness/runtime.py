@@ -14,8 +14,9 @@ import numpy as np
 import torch
 
 from abco_train.config.fields import ConfigError
+from abco_train.harness.code_version import code_version
 
-__all__ = ["seed_everything", "derived_seed", "derived_rng", "resolve_device"]
+__all__ = ["seed_everything", "derived_seed", "derived_rng", "resolve_device", "code_version"]
 
 
 def seed_everything(seed: int, threads: int = 2, deterministic: bool = True) -> np.random.Generator:

@@ -29,6 +29,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from abco_train.config.envs import use_success_rule
 from abco_train.config.run import ConfigError, RunConfig, env_kind
 from abco_train.harness.checkpoint import load_checkpoint, load_method_state
 from abco_train.harness.evaluation import final_evaluation
@@ -83,6 +84,7 @@ class Policy:
     def evaluate(self) -> dict[str, Any]:
         """The run's final evaluation again (same episodes, same seeds; no plots)."""
         cfg = self.config.replace(plots=False)
+        use_success_rule(cfg.env, cfg.success)  # the run's --success (an env of the user's)
         return final_evaluation(cfg, self.data, self.method, [], Path(cfg.run_dir or "."))
 
 

@@ -4,7 +4,12 @@
 file, a dataset id, or nothing for the env's own dataset) into an open
 :class:`abco_data.Dataset`; the trainer and ``abco bench`` both use it.
 :class:`TrainingData` is what a :class:`~abco_train.methods.base.Method` receives: numpy arrays,
-no torch.
+no torch. A maze's RGB frames stay what draws them (:class:`abco_data.arrays.MazeFrames`: one
+background per layout, the agent's cell per frame), drawn a minibatch at a time, so memory
+grows with the episodes and not with their frames (12 KiB each at 64x64, gigabytes for the
+first 10,000 procedural layouts). Every frame drawn is checked once against the file's own,
+as it loads: a file whose frames do not re-render is kept decoded instead, so training sees
+the file's frames either way.
 """
 
 from __future__ import annotations
@@ -15,9 +20,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from gymnasium import spaces
 
 import abco_data
 import abco_envs
+from abco_data.arrays import MazeFrames
+from abco_data.format import LazyH5File
 from abco_train.config.run import ConfigError, RunConfig
 
 __all__ = ["TrainingData", "resolve_dataset", "load_training_data", "distinct_layouts",
@@ -40,10 +48,12 @@ def resolve_dataset(
     progress: bool = False,
     cached_only: bool = False,
 ) -> abco_data.Dataset:
-    """A run's dataset: the file ``ref``, the dataset id ``ref``, or the env's own dataset.
+    """A run's dataset: the file ``ref``, the dataset id ``ref`` (abco's, or a user dataset's:
+    :func:`abco_data.record`), or the env's own dataset.
 
     Args:
-        ref: A path to an HDF5 file, a dataset id, or ``None`` (the env's ``kind`` dataset).
+        ref: A path to an HDF5 file, a dataset id (a user id, ``local/NAME-v0``, is found in
+            the user manifest of ``cache_dir``), or ``None`` (the env's ``kind`` dataset).
         env_id: The run's environment.
         kind: ``"expert"`` or ``"pre_demonstrations"``.
         cache_dir: abco dataset cache (default ``$ABCO_DATA_HOME``).
@@ -54,10 +64,16 @@ def resolve_dataset(
         abco_data.DatasetError: The file or id is unusable (missing, damaged, another kind or
             environment, a checksum mismatch, non-finite values); the message names it.
     """
-    if ref is not None and Path(ref).is_file():
-        # A file given by hand is checked like one from the cache, before any training: its
-        # kind, environment, format version, checksum (when its id is known) and values.
-        return abco_data.check_dataset(ref, kind=kind, env_id=env_id)
+    if ref is not None and (Path(ref).is_file() or abco_data.is_user_id(ref)):
+        # A file given by hand, or a user dataset's (its bytes checked against the user
+        # manifest first), is checked like one from the cache, before any training: its kind,
+        # environment, format version, checksum (when its id is known) and values.
+        if Path(ref).is_file():
+            return abco_data.check_dataset(ref, kind=kind, env_id=env_id)
+        from abco_data.user_datasets import user_dataset_file
+
+        return abco_data.check_dataset(user_dataset_file(ref, cache_dir), kind=kind,
+                                       env_id=env_id, dataset_id=ref)  # fmt: skip
     dataset_id = ref or abco_data.dataset_id(env_id, kind)
     if cached_only:
         home = Path(cache_dir) if cache_dir else abco_data.data_home()
@@ -82,10 +98,13 @@ class TrainingData:
         observation_space: The datasets' observation space.
         n_actions: Size of the discrete action space.
         reference: Expert and random reference returns (per layout for mazes).
-        pre_obs: Pre-demonstration observations, every episode's ``T + 1`` rows.
+        pre_obs: Pre-demonstration observations, every episode's ``T + 1`` rows: an array, or
+            for maze frames :class:`~abco_data.arrays.MazeFrames` (index it with rows:
+            ``pre_obs[rows]`` is an array; methods index it with tensors through
+            :func:`abco_data.torch_view.frames_tensor`).
         pre_t: Row of ``s_t`` of each pre-demonstration transition (``s_t+1`` is the next).
         pre_actions: The true action of each pre-demonstration transition.
-        expert_obs: Expert observations, every episode's ``T + 1`` rows.
+        expert_obs: Expert observations, every episode's ``T + 1`` rows (as ``pre_obs``).
         expert_t: Row of ``s_t`` of each expert transition.
         expert_eval_actions: The expert's true actions: for measuring IDM accuracy (and for
             ``bc``, the supervised reference) only, never as labels of an IfO method.
@@ -100,10 +119,10 @@ class TrainingData:
     observation_space: Any
     n_actions: int
     reference: abco_data.ReferenceReturns
-    pre_obs: np.ndarray
+    pre_obs: np.ndarray | MazeFrames
     pre_t: np.ndarray
     pre_actions: np.ndarray
-    expert_obs: np.ndarray
+    expert_obs: np.ndarray | MazeFrames
     expert_t: np.ndarray
     expert_eval_actions: np.ndarray
     layouts: int | None = None
@@ -115,17 +134,73 @@ class TrainingData:
         return self.reference.layout_ids is not None
 
 
-def _columns(dataset: abco_data.Dataset, episodes: int | None
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, abco_data.DatasetArrays]:  # fmt: skip
-    """Observations, ``s_t`` rows and actions of a dataset's first ``episodes`` episodes (and
-    the arrays they come from)."""
-    arrays = dataset.load_arrays()
+def _frame_size(dataset: abco_data.Dataset) -> tuple[int, int] | None:
+    """``(H, W)`` of a maze dataset's RGB frames (:class:`MazeFrames` can draw them), else
+    None."""
+    space = dataset.observation_space
+    if (isinstance(space, spaces.Box) and space.dtype == np.uint8 and len(space.shape) == 3
+            and space.shape[-1] == 3 and dataset.is_maze):
+        return space.shape[0], space.shape[1]
+    return None
+
+
+def _arrays(dataset: abco_data.Dataset) -> abco_data.DatasetArrays:
+    """Every column of ``dataset``; maze frames left unread (:func:`_observations` draws
+    them)."""
+    return dataset.load_arrays(observations=_frame_size(dataset) is None)
+
+
+def _columns(dataset: abco_data.Dataset, arrays: abco_data.DatasetArrays,
+             episodes: int | None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """``s_t`` rows and actions of the transitions of a dataset's first ``episodes``
+    episodes."""
     obs_t, _ = dataset.transition_index()
     actions = dataset.actions_of_transitions(idm_eval=True)
     if episodes is not None:
         n = int(arrays.episode_lengths[:episodes].sum())
         obs_t, actions = obs_t[:n], actions[:n]
-    return arrays.observations, obs_t, actions, arrays
+    return obs_t, actions
+
+
+def _redraws_file(frames: MazeFrames, dataset: abco_data.Dataset) -> bool:
+    """Whether every frame drawn is the file's (read and compared a block at a time)."""
+    handle = LazyH5File(dataset.path, dataset.file_identity)
+    try:
+        reader = handle.observations()
+        return frames.first_difference(reader.read) is None
+    finally:
+        handle.close()
+
+
+def _maze_part(arrays: abco_data.DatasetArrays) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Layouts, episode lengths and agent positions: what draws a maze's frames."""
+    assert arrays.layouts is not None and arrays.positions is not None, (
+        "a maze's arrays carry layouts and positions (load_arrays checks them)")
+    return arrays.layouts, arrays.episode_lengths, arrays.positions
+
+
+def _observations(datasets: list[abco_data.Dataset], arrays: list[abco_data.DatasetArrays]
+                  ) -> list[np.ndarray | MazeFrames]:  # fmt: skip
+    """Each dataset's observation column: maze frames drawn (one background per layout,
+    shared by datasets of one frame size) when they are the file's; else decoded."""
+    columns: list[np.ndarray | MazeFrames] = [a.observations for a in arrays]
+    groups: dict[tuple[int, int], list[int]] = {}
+    for i, dataset in enumerate(datasets):
+        size = _frame_size(dataset)
+        if size is not None:
+            groups.setdefault(size, []).append(i)
+    for (height, width), members in groups.items():
+        try:
+            drawn: list[MazeFrames | None] = list(MazeFrames.draw_columns(
+                [_maze_part(arrays[i]) for i in members], height=height, width=width))
+        except ValueError:  # frames too small for the maze: not the renderer's
+            drawn = [None] * len(members)
+        for i, frames in zip(members, drawn):
+            if frames is not None and _redraws_file(frames, datasets[i]):
+                columns[i] = frames
+            else:  # the file's own frames, decoded, as ever
+                columns[i] = datasets[i].load_arrays().observations
+    return columns
 
 
 def _first_layouts(dataset: abco_data.Dataset, k: int, flag: str) -> abco_data.Dataset:
@@ -166,10 +241,12 @@ def load_training_data(config: RunConfig) -> TrainingData:
     if config.layouts is not None:
         expert = _first_layouts(expert, config.layouts, "--expert-data")
         pre = _first_layouts(pre, config.layouts, "--pre-data")
-    pre_obs, pre_t, pre_actions, _ = _columns(pre, None)
+    pre_arrays, arrays = _arrays(pre), _arrays(expert)
+    pre_obs, expert_obs = _observations([pre, expert], [pre_arrays, arrays])
+    pre_t, pre_actions = _columns(pre, pre_arrays, None)
     if config.pre_transitions is not None:
         pre_t, pre_actions = pre_t[: config.pre_transitions], pre_actions[: config.pre_transitions]
-    expert_obs, expert_t, expert_actions, arrays = _columns(expert, config.expert_episodes)
+    expert_t, expert_actions = _columns(expert, arrays, config.expert_episodes)
     if config.layouts is not None:
         train_layouts = distinct_layouts(arrays, min(config.layouts, TRAIN_EVAL_LAYOUTS))
         reference = reference.extended(abco_data.layout_reference(train_layouts, "training"))

@@ -44,7 +44,7 @@ from abco_train.harness.training_data import TrainingData
 if TYPE_CHECKING:
     from abco_train.harness.rollouts import Rollouts
 
-__all__ = ["Method", "TrainingFailed", "INTERACTION_KINDS"]
+__all__ = ["Method", "TrainingFailed", "BudgetExceeded", "INTERACTION_KINDS"]
 
 #: Kinds of environment interaction a run may spend (evaluation episodes are not counted):
 #: transitions of the pre-demonstrations it trains on, rollout steps it learns from
@@ -63,6 +63,14 @@ class TrainingFailed(RuntimeError):
     def __init__(self, status: str, message: str, stats: dict[str, Any] | None = None) -> None:
         super().__init__(message)
         self.status, self.stats = status, dict(stats or {})
+
+
+class BudgetExceeded(RuntimeError):
+    """A method tried to count more environment interactions than the run's ``--budget``.
+
+    A method plans within :attr:`Method.budget_left` so that this never happens; the harness
+    ends a run that raises it with status ``over_budget`` (never a normal-looking result).
+    """
 
 
 class Method(ABC):
@@ -102,11 +110,30 @@ class Method(ABC):
 
         Raises:
             ValueError: ``kind`` is not one of :data:`INTERACTION_KINDS`.
+            BudgetExceeded: The run has a ``--budget`` and this would exceed it (a method plans
+                within :attr:`budget_left` instead).
         """
         if kind not in INTERACTION_KINDS:
             raise ValueError(f"unknown interaction kind {kind!r}; expected one of "
                              f"{INTERACTION_KINDS}")  # fmt: skip
+        if self.config.budget is not None and self.spent + int(steps) > self.config.budget:
+            raise BudgetExceeded(
+                f"{kind}: {int(steps):,} more interactions would bring the run to "
+                f"{self.spent + int(steps):,}, over its budget of {self.config.budget:,}"
+            )
         self.interactions[kind] += int(steps)
+
+    @property
+    def spent(self) -> int:
+        """Environment interactions counted so far, all kinds summed."""
+        return sum(self.interactions.values())
+
+    @property
+    def budget_left(self) -> int | None:
+        """Interactions the run may still spend (``None``: the run has no ``--budget``)."""
+        if self.config.budget is None:
+            return None
+        return max(0, self.config.budget - self.spent)
 
     @classmethod
     def defaults(cls, name: str) -> Mapping[str, Any]:
@@ -150,6 +177,12 @@ class Method(ABC):
 
         A method that learns from them counts their steps as ``post_demonstration``."""
         return {}
+
+    def learns_from_rollouts(self, iteration: int) -> bool:
+        """Whether :meth:`observe` learns from (and counts) ``iteration``'s rollouts: with a
+        ``--budget`` the harness then caps them at :attr:`budget_left` steps (default: whether
+        the class overrides :meth:`observe`)."""
+        return type(self).observe is not Method.observe
 
     def expert_labels(self) -> np.ndarray | None:
         """Actions the method inferred for the expert transitions (plotted), if any."""

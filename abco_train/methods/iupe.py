@@ -16,8 +16,9 @@ come from. The paper lists three ingredients; here is where each lives:
 3. *Self-attention* in both networks (SAGAN modules, :mod:`abco_train.networks.builders`).
 
 The exploration rollouts run the same episodes as the evaluation (mazes: every layout of the
-train split) and are counted as ``post_demonstration`` interactions; the greedy evaluation
-runs are not (for ABCO they are the post-demonstrations and are counted).
+train split) and are counted as ``post_demonstration`` interactions (with a ``--budget``, the
+harness cuts them at the interactions left); the greedy evaluation runs are not (for ABCO they
+are the post-demonstrations and are counted).
 
 It is registered through :func:`abco_train.methods.registry.register` like any plugin.
 """

@@ -29,6 +29,7 @@ BUILTIN_MODULES = (
     "abco_train.methods.iupe",
     "abco_train.methods.ilpo.method",
     "abco_train.methods.gaifo.method",
+    "abco_train.methods.reference",
 )
 
 _REGISTRY: dict[str, type[Method]] = {}
@@ -84,7 +85,7 @@ def builtin_options() -> dict[str, type[MethodOptions]]:
     from abco_train.methods.ilpo.options import ILPOOptions
 
     return {**dict.fromkeys(VARIANTS, BCOOptions), "iupe": BCOOptions, "ilpo": ILPOOptions,
-            "gaifo": GAIfOOptions}  # fmt: skip
+            "gaifo": GAIfOOptions, "random": MethodOptions, "expert": MethodOptions}  # fmt: skip
 
 
 def options_class(name: str) -> type[MethodOptions]:

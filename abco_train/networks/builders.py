@@ -18,17 +18,23 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
 from gymnasium import spaces
 
+import abco_envs
 from abco_train.config.run import ARCHS, IDM_INPUTS
 from abco_train.networks.cells import CELLNET_IDM_ITERATIONS, CellNet, PlannedHead
 from abco_train.networks.encoders import CompactCNN, ResNet18, VectorEncoder
 from abco_train.networks.heads import IDMNet, PolicyNet, action_head, small_head
 
-__all__ = ["NetworkSpec", "BUILDERS", "build_networks", "default_arch"]
+__all__ = ["NetworkSpec", "BUILDERS", "build_networks", "default_arch", "image_statistics",
+           "frame_statistics", "MAX_STATISTICS_ROWS"]
+
+#: The most frames :func:`image_statistics` reads (evenly spaced over the data).
+MAX_STATISTICS_ROWS = 20_000
 
 
 @dataclass(frozen=True)
@@ -111,10 +117,60 @@ def _cell_networks(spec: NetworkSpec) -> tuple[PolicyNet, IDMNet]:
                    concat_inputs=True))  # fmt: skip
 
 
+def _channel_statistics(spec: NetworkSpec
+                        ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:  # fmt: skip
+    """The image encoders' ``mean``/``std`` keywords (policy, IDM): none without the data's
+    statistics; the IDM's fused input is a frame and its difference (both scaled to
+    ``[0, 1]``), its ``pair`` input one frame."""
+    if spec.obs_mean is None or spec.obs_std is None:
+        return {}, {}
+    frame = {"mean": np.asarray(spec.obs_mean), "std": np.asarray(spec.obs_std)}
+    if not spec.fused or spec.delta_mean is None or spec.delta_std is None:
+        return frame, frame
+    return frame, {"mean": np.r_[frame["mean"], spec.delta_mean],
+                   "std": np.r_[frame["std"], spec.delta_std]}
+
+
+def image_statistics(frames: np.ndarray, obs_t: np.ndarray) -> dict[str, np.ndarray]:
+    """Per-channel mean and std of ``frames`` (scaled to ``[0, 1]`` when ``uint8``, as the
+    encoders read them) and of the differences ``s_t+1 - s_t`` of the transitions ``obs_t``:
+    :func:`build_networks`' ``obs_mean``, ``obs_std``, ``delta_mean``, ``delta_std`` for
+    frames whose values are not pixels (e.g. MiniGrid's symbolic cells). At most
+    :data:`MAX_STATISTICS_ROWS` transitions, evenly spaced, are read; a std is at least one
+    grey level (1/255).
+
+    Example:
+        >>> frames = np.zeros((3, 2, 2, 1), np.uint8); frames[1:] = 51
+        >>> {k: v.round(3).tolist() for k, v in image_statistics(frames, np.array([0, 1])).items()}
+        {'obs_mean': [0.15], 'obs_std': [0.087], 'delta_mean': [0.1], 'delta_std': [0.1]}
+    """
+    obs_t = np.asarray(obs_t)
+    if len(obs_t) > MAX_STATISTICS_ROWS:
+        obs_t = obs_t[np.linspace(0, len(obs_t) - 1, MAX_STATISTICS_ROWS).astype(np.int64)]
+    scale = 255.0 if frames.dtype == np.uint8 else 1.0
+    s = np.asarray(frames[obs_t], dtype=np.float64) / scale
+    s1 = np.asarray(frames[obs_t + 1], dtype=np.float64) / scale
+    rows = np.concatenate([s, s1]).reshape(-1, frames.shape[-1])
+    deltas = (s1 - s).reshape(-1, frames.shape[-1])
+    floor = 1.0 / 255.0
+    return {"obs_mean": rows.mean(0), "obs_std": np.maximum(rows.std(0), floor),
+            "delta_mean": deltas.mean(0), "delta_std": np.maximum(deltas.std(0), floor)}
+
+
+def frame_statistics(env_id: str, frames: Any, obs_t: np.ndarray) -> dict[str, Any]:
+    """What :func:`build_networks` needs of a run's frames beyond their shape: a maze's
+    ``grid`` (its cells per side, for the cell networks); another env's
+    :func:`image_statistics` of ``frames`` (the pre-demonstrations) at transitions ``obs_t``."""
+    if abco_envs.is_maze(env_id):
+        return {"grid": abco_envs.maze_size(env_id)}
+    return image_statistics(np.asarray(frames), obs_t)
+
+
 def _compact_networks(spec: NetworkSpec) -> tuple[PolicyNet, IDMNet]:
     """``cnn``: the compact CNN (CPU default for frames)."""
-    pm_enc = CompactCNN(_image_shape(spec.shape), spec.attention)
-    idm_enc = CompactCNN(spec.idm_shape, spec.attention)
+    pm_stats, idm_stats = _channel_statistics(spec)
+    pm_enc = CompactCNN(_image_shape(spec.shape), spec.attention, **pm_stats)
+    idm_enc = CompactCNN(spec.idm_shape, spec.attention, **idm_stats)
     idm_features = idm_enc.out_features * (1 if spec.fused else 2)
     pm_head = small_head(pm_enc.out_features, spec.n_actions)
     idm_head = small_head(idm_features, spec.n_actions)
@@ -123,8 +179,9 @@ def _compact_networks(spec: NetworkSpec) -> tuple[PolicyNet, IDMNet]:
 
 def _resnet_networks(spec: NetworkSpec) -> tuple[PolicyNet, IDMNet]:
     """``resnet18``: the paper's image networks with its dropout heads."""
-    pm_enc = ResNet18(_image_shape(spec.shape), spec.attention)
-    idm_enc = ResNet18(spec.idm_shape, spec.attention)
+    pm_stats, idm_stats = _channel_statistics(spec)
+    pm_enc = ResNet18(_image_shape(spec.shape), spec.attention, **pm_stats)
+    idm_enc = ResNet18(spec.idm_shape, spec.attention, **idm_stats)
     idm_features = idm_enc.out_features * (1 if spec.fused else 2)
     return (
         PolicyNet(pm_enc, action_head(512, 512, spec.n_actions, spec.dropout)),
@@ -174,9 +231,12 @@ def build_networks(
             see :class:`~abco_train.networks.heads.IDMNet`).
         hidden: Width of the vector nets (the paper: 12).
         dropout: Dropout of the ResNet heads (the paper: 0.5).
-        obs_mean: Per-feature mean for standardising vector states.
-        obs_std: Per-feature std for standardising vector states.
-        delta_mean: Per-feature mean of ``s_t+1 - s_t`` (the vector IDM's second half).
+        obs_mean: Per-feature mean for standardising vector states; for frames (``cnn``,
+            ``resnet18``), per channel (:func:`image_statistics`; none: frames scaled to
+            ``[0, 1]`` only, as for the mazes).
+        obs_std: Per-feature (frames: per-channel) std.
+        delta_mean: Per-feature mean of ``s_t+1 - s_t`` (the vector IDM's second half; the
+            frame IDM's difference channels).
         delta_std: Per-feature std of ``s_t+1 - s_t``.
         grid: Cells per side of the maze (the cell networks need it).
 

@@ -10,9 +10,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from abco_train.networks.layers import SelfAttention2d, Standardise, image_input
+from abco_train.networks.layers import ImageInput, SelfAttention2d, Standardise
 
-__all__ = ["FeatureSelfAttention", "VectorEncoder", "CompactCNN", "ResNet18", "conv_stack"]
+__all__ = ["FeatureSelfAttention", "VectorEncoder", "CompactCNN", "ResNet18", "conv_stack",
+           "stem_stride"]
 
 
 class FeatureSelfAttention(nn.Module):
@@ -73,16 +74,31 @@ class VectorEncoder(Standardise):
         return self.body(super().forward(x))
 
 
+def stem_stride(height: int, width: int) -> int:
+    """The compact convolutions' first stride (and kernel) for ``height x width`` frames: 4
+    from 32 pixels a side (64x64 frames: 16x16 maps), 2 from 16, else 1 (a small symbolic
+    grid, MiniGrid's 7x7 view: each cell embedded on its own, none merged).
+
+    Example:
+        >>> stem_stride(64, 64), stem_stride(20, 24), stem_stride(7, 7)
+        (4, 2, 1)
+    """
+    side = min(height, width)
+    return 4 if side >= 32 else 2 if side >= 16 else 1
+
+
 def conv_stack(channels: int, activation: type[nn.Module] = nn.LeakyReLU,
-               attention: bool | None = True) -> nn.Sequential:  # fmt: skip
-    """The compact convolutions: ``conv 4x4/4 (16) -> conv 3x3/2 (32) -> SA -> conv 3x3 (32)
-    -> SA -> flatten`` over ``channels`` input channels.
+               attention: bool | None = True, stride: int = 4) -> nn.Sequential:  # fmt: skip
+    """The compact convolutions: ``conv kxk/k (16) -> conv 3x3/2 (32) -> SA -> conv 3x3 (32)
+    -> SA -> flatten`` over ``channels`` input channels, ``k = stride``.
 
     Args:
         channels: Input channels.
         activation: After each convolution.
         attention: ``True``: the two self-attention modules; ``False``: identities in their
             place; ``None``: no slot for them (a plain stack, as GAIfO's learner uses).
+        stride: The first convolution's stride and kernel (:func:`stem_stride`; 4 for
+            64x64 frames).
     """
     def slot() -> list[nn.Module]:
         if attention is None:
@@ -90,7 +106,7 @@ def conv_stack(channels: int, activation: type[nn.Module] = nn.LeakyReLU,
         return [SelfAttention2d(32) if attention else nn.Identity()]
 
     return nn.Sequential(
-        nn.Conv2d(channels, 16, 4, stride=4), activation(),
+        nn.Conv2d(channels, 16, stride, stride=stride), activation(),
         nn.Conv2d(16, 32, 3, stride=2, padding=1), activation(), *slot(),
         nn.Conv2d(32, 32, 3, padding=1), activation(), *slot(),
         nn.Flatten(),
@@ -98,23 +114,33 @@ def conv_stack(channels: int, activation: type[nn.Module] = nn.LeakyReLU,
 
 
 class CompactCNN(nn.Module):
-    """A small CNN for 64x64 RGB that trains fast on CPU, with the paper's attention placement.
+    """A small CNN for 64x64 RGB that trains fast on CPU, with the paper's attention placement;
+    it takes frames of any size (:func:`stem_stride`: a 7x7 grid keeps its cells apart).
 
     ``conv 4x4/4 (16) -> conv 3x3/2 (32) -> SA -> conv 3x3 (32) -> SA -> flatten``: the first
     attention follows the second stage, the second one the last stage, as in the ResNet. The
     features stay spatial (no global pooling), so where the agent's dot is survives.
+
+    ``mean`` and ``std`` (per channel, of frames scaled to ``[0, 1]``) standardise the input
+    (:class:`~abco_train.networks.layers.ImageInput`).
+
+    Example:
+        >>> CompactCNN((7, 7, 3)).out_features, CompactCNN((64, 64, 3)).out_features
+        (512, 2048)
     """
 
-    def __init__(self, image_shape: tuple[int, int, int], attention: bool = True) -> None:
+    def __init__(self, image_shape: tuple[int, int, int], attention: bool = True,
+                 mean: np.ndarray | None = None, std: np.ndarray | None = None) -> None:
         super().__init__()
         h, w, c = image_shape
-        self.body = conv_stack(c, nn.LeakyReLU, attention)
+        self.input = ImageInput(mean, std)
+        self.body = conv_stack(c, nn.LeakyReLU, attention, stem_stride(h, w))
         with torch.no_grad():
             self.out_features = int(self.body(torch.zeros(1, c, h, w)).shape[1])
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Flat features of a batch of ``(H, W, C)`` images."""
-        return self.body(image_input(x))
+        return self.body(self.input(x))
 
 
 class BasicBlock(nn.Module):
@@ -145,12 +171,15 @@ class ResNet18(nn.Module):
     ``64, 128, 256, 512`` channels, global average pooling to 512 features. Following the
     paper (``ResBlock_2 -> SA_64 -> ... -> ResBlock_4 -> SA_128``) the attention modules sit
     after the second residual block (the end of the first stage, 64 channels) and after the
-    fourth (the end of the second stage, 128 channels).
+    fourth (the end of the second stage, 128 channels). ``mean`` and ``std`` as for
+    :class:`CompactCNN`.
     """
 
-    def __init__(self, image_shape: tuple[int, int, int], attention: bool = True) -> None:
+    def __init__(self, image_shape: tuple[int, int, int], attention: bool = True,
+                 mean: np.ndarray | None = None, std: np.ndarray | None = None) -> None:
         super().__init__()
         c = image_shape[2]
+        self.input = ImageInput(mean, std)
         self.stem = nn.Sequential(
             nn.Conv2d(c, 64, 7, 2, 3, bias=False), nn.BatchNorm2d(64), nn.ReLU(),
             nn.MaxPool2d(3, 2, 1),
@@ -168,4 +197,4 @@ class ResNet18(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """512 pooled features of a batch of ``(H, W, C)`` images."""
-        return self.blocks(self.stem(image_input(x))).mean(dim=(2, 3))
+        return self.blocks(self.stem(self.input(x))).mean(dim=(2, 3))

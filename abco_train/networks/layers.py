@@ -8,7 +8,7 @@ import numpy as np
 import torch
 from torch import nn
 
-__all__ = ["SelfAttention2d", "image_input", "Standardise", "standardise"]
+__all__ = ["SelfAttention2d", "image_input", "Standardise", "standardise", "ImageInput"]
 
 
 class SelfAttention2d(nn.Module):
@@ -78,3 +78,30 @@ class Standardise(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Standardised ``x``."""
         return standardise(x, self.mean, self.std)
+
+
+class ImageInput(nn.Module):
+    """:func:`image_input`, then, given the data's per-channel ``mean`` and ``std`` (of frames
+    scaled as :func:`image_input` scales them), each channel standardised: a frame whose
+    values are not pixels (MiniGrid's symbolic cells, small integers: below 0.05 once divided
+    by 255) reaches the convolutions on the scale they learn at. Without statistics it is
+    :func:`image_input` alone and holds no buffers (the mazes' networks)."""
+
+    mean: torch.Tensor | None
+    std: torch.Tensor | None
+
+    def __init__(self, mean: np.ndarray | None = None, std: np.ndarray | None = None) -> None:
+        super().__init__()
+        if mean is None or std is None:
+            self.mean = self.std = None
+            return
+        shape = (1, -1, 1, 1)  # (B, C, H, W): one value per channel
+        self.register_buffer("mean", torch.as_tensor(mean, dtype=torch.float32).reshape(shape))
+        self.register_buffer("std", torch.as_tensor(std, dtype=torch.float32).reshape(shape))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``(B, H, W, C)`` frames -> ``(B, C, H, W)`` floats (standardised, given statistics)."""
+        x = image_input(x)
+        if self.mean is None or self.std is None:
+            return x
+        return (x.float() - self.mean) / self.std

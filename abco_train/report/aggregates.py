@@ -40,8 +40,8 @@ import numpy as np
 
 __all__ = [
     "REPS", "SEED", "TAU", "SEPARATION", "PROFILE_PNG", "INSTALL_HINT", "load_rliable",
-    "score_matrices", "probability_of_improvement", "Aggregates", "compute", "section",
-    "separation",
+    "score_matrices", "probability_of_improvement", "seeded", "Aggregates", "compute",
+    "section", "separation", "plot_profiles", "profile_taus",
 ]  # fmt: skip
 
 #: Bootstrap replicates of every interval (rliable's default for performance profiles).
@@ -103,7 +103,7 @@ def probability_of_improvement(x: np.ndarray, y: np.ndarray) -> float:
 
 
 @contextlib.contextmanager
-def _seeded(seed: int) -> Iterator[None]:
+def seeded(seed: int) -> Iterator[None]:
     """rliable's stratified bootstrap draws from numpy's global generator (``np.random.choice``,
     whatever ``random_state`` it is given): seed it, and restore it afterwards."""
     state = np.random.get_state()  # noqa: NPY002 (rliable's generator, not ours)
@@ -112,6 +112,15 @@ def _seeded(seed: int) -> Iterator[None]:
         yield
     finally:
         np.random.set_state(state)  # noqa: NPY002
+
+
+def profile_taus(matrices: Mapping[str, np.ndarray]) -> np.ndarray:
+    """The thresholds of performance profiles: 61 from below 0 (or the lowest score) to past 1
+    (or the highest)."""
+    everything = np.concatenate([x.ravel() for x in matrices.values()])
+    lo = min(0.0, np.floor(everything.min() * 10) / 10)
+    hi = max(1.0, np.ceil(everything.max() * 10) / 10) + 0.05
+    return np.linspace(lo, hi, 61)
 
 
 @dataclass
@@ -146,7 +155,7 @@ def compute(scores: Scores, envs: Sequence[str], baseline: str, reps: int | None
     agg = Aggregates(matrices, dropped, left_out, baseline)
     if not matrices:
         return agg
-    with _seeded(SEED):
+    with seeded(SEED):
         point, ci = rl.library.get_interval_estimates(
             matrices, lambda x: np.array([rl.metrics.aggregate_iqm(x),
                                           rl.metrics.aggregate_mean(x)]),
@@ -154,17 +163,14 @@ def compute(scores: Scores, envs: Sequence[str], baseline: str, reps: int | None
     for m in matrices:
         agg.iqm[m] = (float(point[m][0]), float(ci[m][0, 0]), float(ci[m][1, 0]))
         agg.mean[m] = (float(point[m][1]), float(ci[m][0, 1]), float(ci[m][1, 1]))
-    everything = np.concatenate([x.ravel() for x in matrices.values()])
-    lo = min(0.0, np.floor(everything.min() * 10) / 10)
-    hi = max(1.0, np.ceil(everything.max() * 10) / 10) + 0.05
-    agg.taus = np.linspace(lo, hi, 61)
-    with _seeded(SEED):
+    agg.taus = profile_taus(matrices)
+    with seeded(SEED):
         agg.profiles, agg.profile_cis = rl.library.create_performance_profile(
             matrices, agg.taus, reps=reps)  # fmt: skip
     if baseline in matrices:
         pairs = {m: [x, matrices[baseline]] for m, x in matrices.items() if m != baseline}
         if pairs:
-            with _seeded(SEED):
+            with seeded(SEED):
                 _, ci = rl.library.get_interval_estimates(
                     pairs, lambda x, y: np.array([probability_of_improvement(x, y)]),
                     reps=reps)  # fmt: skip
@@ -174,21 +180,25 @@ def compute(scores: Scores, envs: Sequence[str], baseline: str, reps: int | None
     return agg
 
 
-def _plot(agg: Aggregates, rl: SimpleNamespace, labels: Mapping[str, str], path: Path) -> Path:
+def plot_profiles(profiles: Mapping[str, np.ndarray], cis: Mapping[str, np.ndarray],
+                  taus: np.ndarray, rl: SimpleNamespace, labels: Mapping[str, str], path: Path,
+                  metric: str, title: str, tau: float | None = None) -> Path:  # fmt: skip
+    """Performance profiles (``rliable.plot_utils``) of ``metric``, one line per method with
+    its bootstrap band; a dotted line at ``tau`` where given."""
     from abco_train.harness.plots import pyplot, save_figure
 
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 4))
-    name = {m: labels.get(m, m) for m in agg.profiles}
+    name = {m: labels.get(m, m) for m in profiles}
     rl.plot_utils.plot_performance_profiles(
-        {name[m]: p for m, p in agg.profiles.items()}, agg.taus,
-        performance_profile_cis={name[m]: c for m, c in agg.profile_cis.items()}, ax=ax,
-        xlabel=r"P ($\tau$)", ylabel=r"fraction of runs with P > $\tau$", labelsize="medium",
-        ticklabelsize="small")  # fmt: skip
-    ax.axvline(TAU, color="grey", ls=":", lw=1)
+        {name[m]: p for m, p in profiles.items()}, taus,
+        performance_profile_cis={name[m]: c for m, c in cis.items()}, ax=ax,
+        xlabel=rf"{metric} ($\tau$)", ylabel=rf"fraction of runs with {metric} > $\tau$",
+        labelsize="medium", ticklabelsize="small")  # fmt: skip
+    if tau is not None:
+        ax.axvline(tau, color="grey", ls=":", lw=1)
     ax.legend(fontsize=8, loc="lower left")
-    ax.set_title(f"Performance profiles over {_n_envs(agg)} envs (95% stratified bootstrap"
-                 " bands)", fontsize=9)  # fmt: skip
+    ax.set_title(title, fontsize=9)
     return save_figure(fig, path)
 
 
@@ -242,7 +252,9 @@ def section(scores: Scores, envs: Sequence[str], baseline: str, out: Path,
             p = agg.poi[m]
             rows.append({**base, "metric": f"probability_of_improvement_over_{baseline}",
                          "mean": p[0], "ci_low": p[1], "ci_high": p[2]})  # fmt: skip
-    png = _plot(agg, rl, label, out / PROFILE_PNG)
+    png = plot_profiles(agg.profiles, agg.profile_cis, agg.taus, rl, label, out / PROFILE_PNG,
+                        "P", f"Performance profiles over {_n_envs(agg)} envs (95% stratified"
+                        " bootstrap bands)", TAU)  # fmt: skip
     lines += ["", f"![Performance profiles: fraction of runs with P > tau]({png.name})", "",
               f"### Probability of improvement over {labels.get(baseline, baseline)}"
               f" (baseline `{baseline}`)", ""]  # fmt: skip

@@ -36,7 +36,6 @@ from abco_train.bench.records import (
     seed_of,
 )
 from abco_train.bench.results_log import read_results
-from abco_train.config.run import env_kind
 from abco_train.harness.run_folder import FINAL, METRICS
 from abco_train.report.published import PAPER_TABLE1, PUBLISHED_AER
 from abco_train.report.stats import CellStats, cell_stats
@@ -79,7 +78,7 @@ CSV_FIELDS = ("table", "env", "method", "evaluation", "metric", "seeds", "mean",
 
 def table_evaluation(env: str, split: str = "train") -> str:
     """The ``final.json`` key of a table's numbers: mazes ``{split}/paper``, else ``episodes``."""
-    return f"{split}/paper" if env_kind(env) == "maze" else "episodes"
+    return f"{split}/paper" if abco_envs.is_maze(env) else "episodes"  # no env to make
 
 
 def method_order(methods: Iterable[str]) -> list[str]:

@@ -2,9 +2,16 @@
 
 Writes ``report.md``, ``results.csv`` (the same numbers, one row per statistic) and the plots
 into ``--out`` (default ``RUNS_DIR/report``). Numbers come from every
-``RUNS_DIR/{env}/{method}/seed{seed}/final.json`` (P, AER, and the environment interactions
-each run spent); wall times, reference returns and failures from ``results.jsonl`` and
-``bench_log.jsonl`` (:mod:`abco_train.bench.results_log`).
+``RUNS_DIR/{task or env}/{method}/seed{seed}/final.json`` (scores, P, AER, and the environment
+interactions each run spent); wall times, reference returns and failures from
+``results.jsonl`` and ``bench_log.jsonl`` (:mod:`abco_train.bench.results_log`).
+
+Two tracks: records that carry a ``task`` (the benchmark track) come first, each task's
+methods ranked by their headline score (:mod:`abco_train.report.headline`), then the IfO
+methods' aggregates over tasks and their pairwise comparisons
+(:mod:`abco_train.report.ranking`); records without one (the paper track) get the paper's
+tables, with the paper's P. Every record's code version and training time:
+:mod:`abco_train.report.provenance`.
 
 The main table (Table 1 re-measured) holds every method found: the built-ins in the order of
 :data:`ORDER`, then any other (a user's plugin) alphabetically. The runs and the tables' names
@@ -33,7 +40,7 @@ from abco_train.bench.records import RecordError, Skipped, check_config, escape,
 from abco_train.harness.run_folder import CONFIG, write_atomic
 from abco_train.methods.base import INTERACTION_KINDS
 from abco_train.report import aggregates as aggregate
-from abco_train.report import generalisation, tables
+from abco_train.report import generalisation, headline, provenance, ranking, tables
 from abco_train.report.plots import plot_label_distributions, plot_performance
 from abco_train.report.published import PAPER_TABLE2, published
 from abco_train.report.runs import (
@@ -96,7 +103,9 @@ def _intro(grid: Grid, skipped: list[Skipped]) -> list[str]:
         " their method's health check (e.g. an IDM at chance: no result, counted as '+k"
         " stopped' beside the seeds and summarised under Missing).",
         f"Settings: {_settings(grid.runs, skipped)}.",
-        "P and AER: mean over seeds with a 95% bootstrap CI, and the IQM. Classic control:",
+        "P: the paper's performance measure, (R - random) / (expert - random) with the",
+        "dataset's reference returns (Monteiro et al., IJCNN 2020), not the benchmark track's",
+        "score. P and AER: mean over seeds with a 95% bootstrap CI, and the IQM. Classic control:",
         "the final evaluation's episodes (unseen seeds); mazes: every layout of the split,",
         "the paper's protocol (4th visit to a cell ends the episode with return -1).",
         f"Interactions ({kinds}): environment steps a run spent, by kind,",
@@ -124,7 +133,7 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
 
     Returns:
         The written files by name (``report``, ``csv``, and the plots that had data:
-        ``performance``, ``labels``, ``profile``, ``generalisation``).
+        ``headline_profile``, ``performance``, ``labels``, ``profile``, ``generalisation``).
 
     Every file is first written into a hidden staging folder in ``out``, then moved into
     place once all were written: a report that fails (a full or read-only disk) leaves the
@@ -159,34 +168,81 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
 def _compose(runs_dir: Path, runs: list[Run], skipped: list[Skipped], out: Path,
              labels_env: str, baseline: str
              ) -> tuple[list[str], list[dict[str, Any]], dict[str, Path]]:  # fmt: skip
-    """The report's Markdown lines, its CSV rows, and its plots (drawn into ``out``)."""
-    grid = Grid([r for r in runs if r.layouts is None])  # the paper's tables: standard data
-    every = Grid(runs)
+    """The report's Markdown lines, its CSV rows, and its plots (drawn into ``out``): the
+    benchmark track (records with a task) first, then the paper track (records without)."""
+    by_task, paper_runs = headline.split_tracks(runs)
     csv_rows: list[dict[str, Any]] = []
-    wall, wall_lines = tables.wall(runs_dir, every, skipped)
-    label = {m: LABELS.get(m, m) for m in every.methods + grid.main_methods}
-    gen_lines, gen_png = generalisation.section(runs, csv_rows, out, label)
-    plots: list[Plot] = [("generalisation", gen_png, generalisation.CAPTION)]
-    profile_png = None
-    if not grid.runs:  # procedural-data runs only: the generalisation section
-        md = [*_intro(every, skipped), "", "## Generalisation", "", *gen_lines]
-    else:
-        agg_lines, agg_rows, profile_png = aggregate.section(
-            grid.scores(grid.main_methods, TABLE1_ENVS), TABLE1_ENVS, baseline, out, label,
-            evaluation="train/paper (mazes), episodes")  # fmt: skip
-        md = [*_intro(grid, skipped),
-              *_paper_sections(grid, wall, agg_lines, gen_lines, label, csv_rows)]
-        csv_rows += agg_rows  # the aggregates' rows last
-        plots[:0] = _paper_plots(grid, out, labels_env)
-    md += ["", "## Wall time", "", *wall_lines, "", "## Plots", ""]
+    wall, wall_lines = tables.wall(runs_dir, Grid(runs), skipped)
+    current, why = provenance.current_code_version()
+    md = ["## Code versions", "", *provenance.versions_section(runs, current, why)]
+    plots: list[Plot] = []
     files: dict[str, Path] = {}
+    if by_task:
+        flags = provenance.flagged_counts(runs, current)
+        lines, png = _benchmark(by_task, flags, skipped, out, csv_rows)
+        md += lines
+        if png is not None:
+            files["headline_profile"] = png
+    if paper_runs:
+        lines, plots, png = _paper_track(paper_runs, skipped, out, labels_env, baseline, wall,
+                                         csv_rows)  # fmt: skip
+        md += lines
+        if png is not None:
+            files["profile"] = png
+    md += ["", "## Wall time", "", *wall_lines, "", *provenance.training_time(runs),
+           "", "## Plots", ""]  # fmt: skip
     _plots(md, files, plots)
-    if profile_png is not None:
-        files["profile"] = profile_png
     # last, once every record the report reads has been read: what ran, and what was skipped
     md[:0] = [f"# IfO benchmark: {escape(runs_dir)}", "", "## Summary", "",
               *summary(runs, skipped), ""]  # fmt: skip
     return md, csv_rows, files
+
+
+def _benchmark(by_task: dict[str, list[Run]], flags: dict[tuple[str, str], dict[str, int]],
+               skipped: list[Skipped], out: Path, csv_rows: list[dict[str, Any]]
+               ) -> tuple[list[str], Path | None]:  # fmt: skip
+    """The benchmark track's sections: a table per task, the aggregates over tasks and the
+    pairwise comparisons of the IfO methods (their profile plot drawn into ``out``)."""
+    cells = headline.task_cells(by_task)
+    track = [r for runs in by_task.values() for r in runs]
+    md = ["", "## Headline: the benchmark track, task by task", "",
+          *headline.intro(len(cells), len(track), _settings(track, skipped))]  # fmt: skip
+    for task, by_method in cells.items():
+        flagged = {m: c for (t, m), c in flags.items() if t == task}
+        md += ["", *headline.task_table(task, by_method, flagged, csv_rows)]
+    ifo = [c for by_method in cells.values() for m, c in by_method.items()
+           if m in headline.IFO_METHODS]  # fmt: skip
+    scores: dict[str, dict[str, dict[int, float]]] = {}
+    for c in ifo:
+        if c.scored and c.values:
+            scores.setdefault(c.method, {})[c.task] = c.values
+    older = sum(c.older if c.scored else len(c.values) for c in ifo)
+    lines, png = ranking.section(scores, list(cells), out, headline.HEADLINE_LABELS, csv_rows,
+                                 older)  # fmt: skip
+    return [*md, "", *lines], png
+
+
+def _paper_track(runs: list[Run], skipped: list[Skipped], out: Path, labels_env: str,
+                 baseline: str, wall: float | None, csv_rows: list[dict[str, Any]]
+                 ) -> tuple[list[str], list[Plot], Path | None]:  # fmt: skip
+    """The paper track's sections (records without a task), its plots, and its aggregates'
+    profile plot (``None``: not drawn)."""
+    grid = Grid([r for r in runs if r.layouts is None])  # the paper's tables: standard data
+    every = Grid(runs)
+    label = {m: LABELS.get(m, m) for m in every.methods + grid.main_methods}
+    gen_lines, gen_png = generalisation.section(runs, csv_rows, out, label)
+    plots: list[Plot] = [("generalisation", gen_png, generalisation.CAPTION)]
+    head = ["", "## The paper track: records without a task (the paper's P)", ""]
+    if not grid.runs:  # procedural-data runs only: the generalisation section
+        md = [*head, *_intro(every, skipped), "", "## Generalisation", "", *gen_lines]
+        return md, plots, None
+    agg_lines, agg_rows, profile_png = aggregate.section(
+        grid.scores(grid.main_methods, TABLE1_ENVS), TABLE1_ENVS, baseline, out, label,
+        evaluation="train/paper (mazes), episodes")  # fmt: skip
+    md = [*head, *_intro(grid, skipped),
+          *_paper_sections(grid, wall, agg_lines, gen_lines, label, csv_rows)]
+    csv_rows += agg_rows  # the aggregates' rows last
+    return md, _paper_plots(grid, out, labels_env) + plots, profile_png
 
 
 def _out_folder(runs_dir: Path, out: str | Path | None) -> Path:

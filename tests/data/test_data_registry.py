@@ -1,25 +1,40 @@
 """The registry of the dataset ids: twelve of Table 1, three start-cell pre-demonstrations,
-four procedural ones, one held-action set (Acrobot)."""
+four procedural ones, one held-action set (Acrobot), then LunarLander's two."""
 
 import pytest
 
 import abco_data
+import abco_envs
 from abco_data.errors import UnknownDatasetError
+from abco_data.registry import ADDED_ENVS, ENV_NAMES, TABLE1_ENVS
 
 
 def test_twelve_ids_two_kinds_per_env():
-    assert len(abco_data.DATASET_IDS) == 20
-    assert len(set(abco_data.DATASET_IDS)) == 20
+    assert len(abco_data.DATASET_IDS) == 22
+    assert len(set(abco_data.DATASET_IDS)) == 22
     assert abco_data.DATASET_IDS[12:15] == tuple(f"abco/maze{n}x{n}-pre-start-v0"
                                                  for n in (3, 5, 10))
     assert abco_data.DATASET_IDS[15:19] == tuple(f"abco/maze{n}x{n}-procedural-{k}-v0"
                                                  for n in (5, 10) for k in ("expert", "pre"))
-    assert abco_data.DATASET_IDS[19:] == ("abco/acrobot-pre-held-v0",)
-    for env_id in ("AbcoMaze3x3-v0", "AbcoMaze5x5-v0", "AbcoMaze10x10-v0", "CartPole-v1",
-                   "Acrobot-v1", "MountainCar-v0"):
+    assert abco_data.DATASET_IDS[19:20] == ("abco/acrobot-pre-held-v0",)
+    assert abco_data.DATASET_IDS[20:] == ("abco/lunarlander-expert-v0",
+                                          "abco/lunarlander-pre-v0")
+    for env_id in (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS):
         for kind in ("expert", "pre_demonstrations"):
             s = abco_data.spec(abco_data.dataset_id(env_id, kind))
             assert (s.env_id, s.kind) == (env_id, kind)
+
+
+def test_lunar_lander_datasets_are_made_as_the_classic_ones():
+    """The counts of the other classic-control datasets, and seeds after every older one's
+    (so no older dataset's seed, or bytes, moved when they were added)."""
+    for kind in ("expert", "pre"):
+        lunar = dict(abco_data.spec(f"abco/lunarlander-{kind}-v0").params)
+        cartpole = dict(abco_data.spec(f"abco/cartpole-{kind}-v0").params)
+        assert {**lunar, "seed": 0} == {**cartpole, "seed": 0}
+    seeds = [abco_data.spec(i).params["seed"] for i in abco_data.DATASET_IDS]
+    assert seeds == [(k + 1) * 1_000_000 for k in range(22)]
+    assert set(ENV_NAMES) == {*TABLE1_ENVS, *ADDED_ENVS}
 
 
 def test_id_spelling():
@@ -30,7 +45,7 @@ def test_id_spelling():
 
 def test_seeds_are_distinct():
     seeds = [abco_data.spec(i).params["seed"] for i in abco_data.DATASET_IDS]
-    assert len(set(seeds)) == 20
+    assert len(set(seeds)) == 22
 
 
 def test_held_action_dataset():

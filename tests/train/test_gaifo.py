@@ -35,6 +35,7 @@ from abco_train.methods.gaifo.method import (  # noqa: E402
 from abco_train.methods.gaifo.options import (  # noqa: E402
     COMMON_OPTIONS,
     GAIFO_DEFAULTS,
+    ZOO_PPO,
     GAIfOOptions,
 )
 
@@ -145,9 +146,12 @@ def test_same_seed_same_run_on_cpu(tiny_data, tmp_path):
     assert any(not torch.equal(v, other[2]["policy"][k]) for k, v in first[2]["policy"].items())
 
 
-def test_a_resumed_run_ends_as_an_uninterrupted_one_and_reloads(tiny_data, tmp_path):
-    whole = train(gaifo_config("CartPole-v1", tiny_data, tmp_path / "whole"))
-    cfg = gaifo_config("CartPole-v1", tiny_data, tmp_path / "cut")
+# CartPole: linear schedules; Acrobot: VecNormalize (whole episodes: capped ones score nothing)
+@pytest.mark.parametrize(("env_id", "cap"), [("CartPole-v1", 30), ("Acrobot-v1", None)])
+def test_a_resumed_run_ends_as_an_uninterrupted_one_and_reloads(env_id, cap, tiny_data,
+                                                                tmp_path):  # fmt: skip
+    whole = train(gaifo_config(env_id, tiny_data, tmp_path / "whole", eval_max_steps=cap))
+    cfg = gaifo_config(env_id, tiny_data, tmp_path / "cut", eval_max_steps=cap)
     assert train(cfg, stop_after=1) is None
     resumed = train(cfg)
     assert resumed["episodes"] == whole["episodes"]
@@ -179,17 +183,19 @@ def test_options_are_checked_and_named_as_their_flags(given, message):
         GAIfOOptions.for_run(RunConfig(env="CartPole-v1", method="gaifo", method_options=given))
 
 
-def test_options_resolve_common_then_kind_then_env_then_user():
+def test_options_resolve_common_then_zoo_then_kind_then_env_then_user():
     def run(env, **given):
         return GAIfOOptions.for_run(RunConfig(env=env, method="gaifo", method_options=given))
 
-    assert run("Acrobot-v1").to_dict() == COMMON_OPTIONS  # every option, in the table's order
+    # every option, in the table's order: SB3's defaults under the Zoo's Acrobot row
+    assert run("Acrobot-v1").to_dict() == {**COMMON_OPTIONS, **ZOO_PPO["Acrobot-v1"]}
     assert list(run("Acrobot-v1").to_dict()) == list(COMMON_OPTIONS)
     maze = run("AbcoMaze5x5-v0")
-    assert (maze.rl_steps, maze.n_steps) == (GAIFO_DEFAULTS["maze"]["rl_steps"], 64)
+    assert (maze.rl_steps, maze.n_steps) == (GAIFO_DEFAULTS["maze"]["rl_steps"], 128)
     cartpole = run("CartPole-v1")
-    assert (cartpole.rl_steps, cartpole.reward) == (50_000, "gail")
-    assert run("CartPole-v1", reward="logit", n_steps=8).reward == "logit"
+    assert (cartpole.rl_steps, cartpole.reward, cartpole.n_steps) == (50_000, "gail", 32)
+    changed = run("CartPole-v1", reward="logit", n_steps=8, normalize=True)
+    assert (changed.reward, changed.n_steps, changed.normalize) == ("logit", 8, True)
     # the defaults' lists are not shared between runs
     run("Acrobot-v1").net_arch.append(1)
     assert run("Acrobot-v1").net_arch == [64, 64] == COMMON_OPTIONS["net_arch"]
@@ -207,7 +213,8 @@ def test_options_are_flags_of_their_own_with_the_gaifo_prefix():
 
 def test_the_resolved_options_are_the_runs_method_options(tiny_data, tmp_path):
     cfg = resolve_config(gaifo_config("CartPole-v1", tiny_data, tmp_path))
-    assert cfg.method_options == {**COMMON_OPTIONS, **GAIFO_DEFAULTS["CartPole-v1"], **TINY}
+    assert cfg.method_options == {**COMMON_OPTIONS, **ZOO_PPO["CartPole-v1"],
+                                  **GAIFO_DEFAULTS["CartPole-v1"], **TINY}  # fmt: skip
 
 
 def test_options_and_method_modules_import_without_torch_or_sb3():

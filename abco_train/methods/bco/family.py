@@ -37,6 +37,9 @@ expert pair gets one label; it is re-initialised and trained again once, and if 
 at chance the run stops with :class:`~abco_train.methods.base.TrainingFailed` (status
 ``idm_at_chance``) instead of ending with a normal-looking result.
 
+With a ``--budget`` (environment interactions), ``I_pre`` is the first ``budget`` transitions
+at most, and the harness cuts the runs learned from at the budget left.
+
 Budgets are equal across variants: a variant that runs one iteration (``bc``, ``bco``) trains
 its policy for as many epochs as the iterative ones do over all their iterations,
 ``policy_epochs * (first_epochs_factor + iterations)``, so no baseline is behind on epochs.
@@ -64,8 +67,8 @@ from typing import Any, TypeVar
 import numpy as np
 import torch
 
-import abco_envs
-from abco_train.config.run import RunConfig, env_kind
+from abco_data.torch_view import frames_tensor
+from abco_train.config.run import RunConfig
 from abco_train.harness.rollouts import Rollouts
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method, TrainingFailed
@@ -73,7 +76,7 @@ from abco_train.methods.bco.fitting import fit, predict, validation_split
 from abco_train.methods.bco.options import VARIANTS, BCOOptions
 from abco_train.methods.bco.sampling import sample_training_set
 from abco_train.methods.registry import register
-from abco_train.networks.builders import build_networks
+from abco_train.networks.builders import build_networks, frame_statistics
 
 __all__ = ["VARIANTS", "BCOFamily", "DEAD_MARGIN", "MIN_JUDGED"]
 
@@ -117,15 +120,20 @@ class BCOFamily(Method):
         super().__init__(config, data, rng)
         variant = self.variant(config.method)
         self.idm_data, self.iterative = variant["idm_data"], variant["iterative"]
+        # I_pre: with a --budget, the first transitions it pays for (every one is counted).
+        paid = self.budget_left if self.idm_data is not None else None  # None: all of them
+        pre_t, pre_actions = data.pre_t[:paid], data.pre_actions[:paid]
         # -- networks (mean/std of the states standardise vector inputs) ----------------------
         stats: dict[str, Any] = {}
         if len(data.observation_space.shape) == 1:
-            states = data.pre_obs.astype(np.float64)
-            deltas = states[data.pre_t + 1] - states[data.pre_t]
+            rows = (np.unique(np.concatenate([pre_t, pre_t + 1]))
+                    if len(pre_t) < len(data.pre_t) else slice(None))  # only what it paid for
+            states = data.pre_obs[rows].astype(np.float64)
+            deltas = data.pre_obs[pre_t + 1].astype(np.float64) - data.pre_obs[pre_t]
             stats = {"obs_mean": states.mean(0), "obs_std": states.std(0),
                      "delta_mean": deltas.mean(0), "delta_std": deltas.std(0)}  # fmt: skip
-        if env_kind(config.env) == "maze":  # the cellnet reads the frame cell by cell
-            stats["grid"] = abco_envs.maze_size(config.env)
+        else:  # frames: a maze's grid (the cellnet reads it cell by cell), another env's
+            stats = frame_statistics(config.env, data.pre_obs, pre_t)  # channel statistics
         self.net_stats = stats
         self.augment = self.options.augment == "transpose"
         self.policy, self.idm = build_networks(
@@ -139,20 +147,20 @@ class BCOFamily(Method):
         self.policy_opt = torch.optim.Adam(self.policy.parameters(), lr=_resolved(config.lr))
         self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=_resolved(config.lr))
         # -- data as torch tensors (no copies) ------------------------------------------------
-        self.pre_obs = torch.from_numpy(data.pre_obs)
+        self.pre_obs = frames_tensor(data.pre_obs)
         if self.idm_data is None:  # BC has no IDM to measure
-            keep, held = np.arange(len(data.pre_t)), np.zeros(0, dtype=np.int64)
+            keep, held = np.arange(len(pre_t)), np.zeros(0, dtype=np.int64)
         else:
-            keep, held = validation_split(len(data.pre_t), self.options.idm_validation, config.seed)
-        self.pre_t = torch.from_numpy(data.pre_t[keep])
-        self.pre_actions = torch.from_numpy(data.pre_actions[keep])
+            keep, held = validation_split(len(pre_t), self.options.idm_validation, config.seed)
+        self.pre_t = torch.from_numpy(pre_t[keep])
+        self.pre_actions = torch.from_numpy(pre_actions[keep])
         if self.idm_data is not None:  # its IDM learns from (and is measured on) all of I_pre
-            self.count("pre_demonstration", len(data.pre_t))
-        self.val_t = torch.from_numpy(data.pre_t[held])
-        self.val_actions = torch.from_numpy(data.pre_actions[held])
-        shares = np.bincount(data.pre_actions[held], minlength=data.n_actions) / max(len(held), 1)
+            self.count("pre_demonstration", len(pre_t))
+        self.val_t = torch.from_numpy(pre_t[held])
+        self.val_actions = torch.from_numpy(pre_actions[held])
+        shares = np.bincount(pre_actions[held], minlength=data.n_actions) / max(len(held), 1)
         self.chance = float(shares.max())
-        self.expert_obs = torch.from_numpy(data.expert_obs)
+        self.expert_obs = frames_tensor(data.expert_obs)
         self.expert_t = torch.from_numpy(data.expert_t)
         # -- I_pos (accumulated post-demonstrations) and the current I_s ----------------------
         self.pos_obs = torch.zeros((0, *data.pre_obs.shape[1:]), dtype=self.pre_obs.dtype)
@@ -315,6 +323,10 @@ class BCOFamily(Method):
 
     # -- post-demonstrations and the next I_s --------------------------------------------------
 
+    def learns_from_rollouts(self, iteration: int) -> bool:
+        """Iterative variants with an IDM learn from every iteration's runs but the last's."""
+        return self.iterative and self.idm_data is not None and iteration + 1 < self.num_iterations
+
     def observe(self, iteration: int, rollouts: Rollouts) -> dict[str, float]:
         """Append the runs to ``I_pos`` and re-sample ``I_s`` for the next iteration."""
         if not self.iterative or self.idm_data is None or rollouts.observations is None:
@@ -322,7 +334,7 @@ class BCOFamily(Method):
         # recorded runs: their actions, obs_t and run_ids come with the observations
         assert (rollouts.actions is not None and rollouts.obs_t is not None
                 and rollouts.run_ids is not None)  # fmt: skip
-        if iteration + 1 < self.num_iterations:  # the last iteration's runs train nothing
+        if self.learns_from_rollouts(iteration):  # the last iteration's runs train nothing
             self.count("post_demonstration", int(rollouts.lengths.sum()))
         keep_all = self.idm_data in ("pos", "pre+pos", "whole")
         runs = np.arange(len(rollouts.successes))

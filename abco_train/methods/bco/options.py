@@ -116,8 +116,8 @@ class BCOOptions(MethodOptions):
         if self.min_updates and self.max_updates and self.min_updates > self.max_updates:
             raise ConfigError(f"--min-updates {self.min_updates} is above --max-updates "
                               f"{self.max_updates}: a policy unit cannot make both")  # fmt: skip
-        if kind == "classic" and self.augment not in (None, "none"):
-            raise ConfigError(f"--augment {self.augment} is for maze frames; classic control "
+        if kind != "maze" and self.augment not in (None, "none"):
+            raise ConfigError(f"--augment {self.augment} is for maze frames; {config.env} "
                               "takes --augment none")  # fmt: skip
 
 
@@ -128,6 +128,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
     "classic": {"idm_input": "difference", "idm_epochs": 2, "idm_patience": 1,
                 "policy_epochs": 4, "first_epochs_factor": 2, "idm_samples": 50_000},
 }  # fmt: skip
+DEFAULTS["image"] = DEFAULTS["maze"]  # other image envs: the mazes' schedule
 
 #: Changes by (env kind, preset). ``paper``: the paper's ResNet-18 reads each frame apart.
 #: ``general`` (unseen layouts): transposed mazes for twice the data, and exactly 1,000 policy

@@ -50,20 +50,27 @@ the paper) with the cost ``log D(s, s')``. Here is where each piece lives:
   there), and it stores the pairs for step (b). The env's own reward never reaches PPO (the
   Monitor keeps the true return for the log only). Termination and truncation pass through
   unchanged: SB3 bootstraps the value of truncated episodes (``TimeLimit.truncated``) and
-  not of terminated ones. Mazes train on the train split with the env's own resets: each episode a
-  layout drawn from the split, start ``(0, 0)``, as in evaluation.
+  not of terminated ones. Mazes train on the train split with the env's own resets: each
+  episode a layout drawn from the split, start ``(0, 0)``, as in evaluation. Where the
+  settings say ``normalize`` (the Zoo's), SB3's ``VecNormalize`` sits between that wrapper
+  and PPO: ``D`` sees raw observations, PPO standardised ones (vectors) and scaled rewards,
+  and :meth:`act` standardises by the same statistics (checkpointed).
 * **Adversarial loop** (:meth:`GAIfO.train_iteration`): one *round* is one PPO rollout of
   ``n_steps * n_envs`` env steps with the current ``D``'s rewards followed by PPO's update
   (``n_epochs`` epochs of minibatches ``batch_size``), then ``d_epochs`` passes of ``D``
   over that rollout's pairs, each learner minibatch of ``d_batch_size`` against as many
-  expert pairs drawn uniformly (steps (a), (c), (b)). The run's budget ``rl_steps`` (PPO env
-  steps per run) is split into rounds, spread evenly over the harness's iterations, each of
-  which is then evaluated by the harness (greedy: PPO's deterministic actions, :meth:`act`).
+  expert pairs drawn uniformly (steps (a), (c), (b)). The run's PPO steps, ``rl_steps``
+  capped by the run's ``--budget``, rounded *down* to whole rounds (SB3's ``learn()`` runs
+  whole rollouts: rounding down keeps it within the budget), are spread evenly over the
+  harness's iterations (the last takes what is left), each of which is then evaluated by the
+  harness (greedy: PPO's deterministic actions, :meth:`act`). A budget below one round ends
+  the run with status ``budget_too_small``. PPO's linear schedules (``*_schedule``) run over
+  these planned steps, not over one ``learn()`` call (:class:`~.sb3.RunSchedule`).
 
 Every PPO env step is counted as ``rl`` (SB3's ``num_timesteps``, which every iteration
-restarts); the method uses no
-pre-demonstrations and learns nothing from the harness's evaluation runs, so both other
-counts stay 0. Expert actions are never read.
+restarts), never past the budget; the method uses no pre-demonstrations and learns nothing
+from the harness's evaluation runs, so both other counts stay 0. Expert actions are never
+read.
 
 Seeding: ``D`` is initialised from torch's generator (seeded by the harness); PPO gets
 ``seed=`` derived from the run's seed (SB3 then re-seeds python, numpy's and torch's global
@@ -75,10 +82,11 @@ uninterrupted one (torch's generator, PPO's action draws, is checkpointed by the
 Same seed, same run on CPU.
 
 Settings are :class:`~abco_train.methods.gaifo.options.GAIfOOptions` (``--gaifo-*`` flags or
-``config.method_options``) over the per-environment table
-:data:`~abco_train.methods.gaifo.options.GAIFO_DEFAULTS`; the RunConfig fields of ABCO's networks
-(``lr``, ``batch_size``, epochs) are not used, ``arch`` and ``attention`` choose the image
-discriminator's network.
+``config.method_options``) over the RL Baselines3 Zoo's published PPO hyperparameters per
+environment family (:data:`~abco_train.methods.gaifo.options.ZOO_PPO`, sources there) and
+GAIfO's own :data:`~abco_train.methods.gaifo.options.GAIFO_DEFAULTS`; the RunConfig fields of
+ABCO's networks (``lr``, ``batch_size``, epochs) are not used, ``arch`` and ``attention``
+choose the image discriminator's network.
 """
 
 from __future__ import annotations
@@ -91,6 +99,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from abco_data.torch_view import frames_tensor
 from abco_train.config.run import ConfigError, RunConfig, env_kind
 from abco_train.harness.runtime import derived_seed
 from abco_train.harness.training_data import TrainingData
@@ -102,6 +111,7 @@ from abco_train.networks.heads import IDMNet
 
 if TYPE_CHECKING:
     from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
 
     from abco_train.methods.gaifo.sb3 import DiscriminatorReward
 
@@ -203,18 +213,25 @@ class GAIfO(Method):
         self.discriminator = build_discriminator(
             data, config.arch, bool(config.attention), opt.d_hidden).to(self.device)
         self.d_opt = torch.optim.Adam(self.discriminator.parameters(), lr=opt.d_lr)
-        self.expert_obs = torch.from_numpy(data.expert_obs)
+        self.expert_obs = frames_tensor(data.expert_obs)
         self.expert_t = torch.from_numpy(data.expert_t)
         # -- the learner's env (the run's env, its reward replaced by D's) and its PPO --------
         maze = env_kind(config.env) == "maze"
         kwargs = {**data.env_kwargs, "split": "train"} if maze else dict(data.env_kwargs)
         self.env: DiscriminatorReward = sb3.learner_env(config.env, kwargs, opt.n_envs,
                                                         self.reward)  # fmt: skip
+        self.normalizer: VecNormalize | None = sb3.normalizer(self.env, opt, frames=maze)
+        self.progress = sb3.RunProgress()  # the linear schedules' clock (train_iteration)
         self.model: PPO = sb3.make_ppo(
-            self.env, opt, frames=maze, expert_states=data.expert_obs[data.expert_t],
+            self.normalizer or self.env, opt, frames=maze, progress=self.progress,
             seed=derived_seed(config.seed, _SB3_SEED), device=self.device)  # fmt: skip
-        self.round_steps = opt.n_steps * opt.n_envs
-        self.rounds_total = -(-opt.rl_steps // self.round_steps)
+        # -- the plan: the run's PPO steps in whole rollouts, within its budget -------------
+        self.round_steps = opt.rollout_steps
+        # GAIfO spends nothing but RL steps, so the budget left now is what learning may use;
+        # rounding down keeps PPO (whose learn() runs whole rollouts) within it.
+        left = self.budget_left
+        steps = opt.rl_steps if left is None else min(opt.rl_steps, left)
+        self.rounds_total = steps // self.round_steps
 
     # -- the reward and the discriminator's updates ------------------------------------------
 
@@ -271,11 +288,33 @@ class GAIfO(Method):
 
     # -- the adversarial loop ------------------------------------------------------------------
 
-    def rounds_of(self, iteration: int) -> int:
-        """Rounds of iteration ``iteration``: the run's rounds spread evenly (earlier ones get
-        the remainder)."""
+    def rounds_by(self, iteration: int) -> int:
+        """Rounds planned for iterations ``0..iteration`` together: the run's rounds spread
+        evenly over its iterations (earlier ones get the remainder)."""
         per, extra = divmod(self.rounds_total, self.num_iterations)
-        return per + (1 if iteration < extra else 0)
+        return per * (iteration + 1) + min(iteration + 1, extra)
+
+    def rounds_of(self, iteration: int) -> int:
+        """Rounds iteration ``iteration`` runs: the plan's up to it less the rounds already run
+        (the last iteration takes what is left), never more than the budget left pays for.
+
+        Raises:
+            TrainingFailed: ``budget_too_small``: the run's budget cannot pay for one PPO
+                rollout.
+        """
+        if self.rounds_total == 0:  # options.check keeps rl_steps >= one rollout: the budget
+            rollout, opt = self.round_steps, self.options
+            raise TrainingFailed(
+                "budget_too_small",
+                f"the run's --budget of {self.config.budget:,} interactions cannot pay for one "
+                f"PPO rollout of {rollout:,} env steps (--gaifo-n-steps {opt.n_steps} x "
+                f"--gaifo-n-envs {opt.n_envs}); give a budget of at least {rollout:,} or "
+                "smaller rollouts",
+                {"budget": self.config.budget, "rollout_steps": rollout})  # fmt: skip
+        done = self.interactions["rl"] // self.round_steps
+        rounds = max(0, self.rounds_by(iteration) - done)
+        left = self.budget_left
+        return rounds if left is None else min(rounds, left // self.round_steps)
 
     def train_iteration(self, iteration: int) -> dict[str, float]:
         """Rounds of PPO on D's rewards, each followed by D's update on its pairs."""
@@ -284,11 +323,15 @@ class GAIfO(Method):
         np.random.seed(seed)  # noqa: NPY002 -- PPO draws its minibatch order from it
         env.seed(seed)  # the next reset seeds the episodes (exact resuming)
         rounds = self.rounds_of(iteration)
+        done = self.interactions["rl"] // self.round_steps
         t_rl = t_d = 0.0
         stats: dict[str, Any] = {}
         rewards: list[float] = []
         for k in range(rounds):
             before, t0 = (0 if k == 0 else model.num_timesteps), time.perf_counter()
+            # the run's progress after this rollout, as SB3 computes it within one learn()
+            # call: the linear schedules reach 0 at the run's last update (the Zoo's lin_)
+            self.progress.remaining = 1.0 - (done + k + 1) / self.rounds_total
             # The iteration's first round starts afresh (reset_num_timesteps): SB3 resets the
             # env (the seeded episodes above) and empties its episode log (this iteration's
             # episodes only); with constant schedules its step count steers nothing else.
@@ -314,29 +357,42 @@ class GAIfO(Method):
         })  # fmt: skip
         if iteration == 0:
             stats["options"] = self.options.to_dict()  # the run's effective settings
+            stats["rl_steps_planned"] = self.rounds_total * self.round_steps
         return stats
 
     # -- acting and state -----------------------------------------------------------------------
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """PPO's deterministic (most probable) actions for a batch of observations."""
-        actions, _ = self.model.predict(np.asarray(obs), deterministic=True)
+        seen: Any = np.asarray(obs)
+        if self.normalizer is not None:  # PPO learnt on normalised observations
+            seen = self.normalizer.normalize_obs(seen)
+        actions, _ = self.model.predict(seen, deterministic=True)
         return np.asarray(actions, dtype=np.int64).reshape(-1)
 
     def state_dict(self) -> dict[str, Any]:
-        """PPO's networks and optimiser, D and its optimiser, the rng: data, tensors and ints.
-        (PPO's step count is not needed: every iteration restarts it, :meth:`train_iteration`.)"""
+        """PPO's networks and optimiser, the normaliser's statistics, D and its optimiser, the
+        rng: data, tensors and ints. (PPO's step count is not needed: every iteration restarts
+        it, :meth:`train_iteration`; the schedules' progress follows from the ``rl`` count.)"""
+        from abco_train.methods.gaifo import sb3
+
+        norm = self.normalizer
         return {
             "policy": self.model.policy.state_dict(),
             "policy_opt": self.model.policy.optimizer.state_dict(),
+            "normalizer": {} if norm is None else sb3.normalizer_state(norm),
             "discriminator": self.discriminator.state_dict(), "d_opt": self.d_opt.state_dict(),
             "rng": self.rng.bit_generator.state,
         }  # fmt: skip
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Restore :meth:`state_dict` (an older checkpoint's ``num_timesteps`` is not read)."""
+        from abco_train.methods.gaifo import sb3
+
         self.model.policy.load_state_dict(state["policy"])
         self.model.policy.optimizer.load_state_dict(state["policy_opt"])
+        if self.normalizer is not None:
+            sb3.load_normalizer_state(self.normalizer, state["normalizer"])
         self.discriminator.load_state_dict(state["discriminator"])
         self.d_opt.load_state_dict(state["d_opt"])
         self.rng.bit_generator.state = state["rng"]

@@ -75,9 +75,10 @@ so far (``remap_epochs`` epochs). The steps run in a vector env of ``remap_envs`
 their own (:func:`abco_train.harness.rollouts.make_vector_env`, reset from the run's
 generator; mazes: the train split's layouts from the start cell, cycling through them,
 episodes cut after ``remap_max_steps``, default ``4 n^2``); the step after an episode ends is
-the env's reset, not a transition, and is neither kept nor counted. ILPO
-learns nothing from the evaluation runs (no post-demonstrations) and uses no
-pre-demonstrations (it counts none).
+the env's reset, not a transition, and is neither kept nor counted; with a ``--budget`` a
+round takes at most the interactions left (none once it is spent). ILPO learns nothing
+from the evaluation runs (no post-demonstrations) and uses no pre-demonstrations (it counts
+none).
 
 Diagnostics (``metrics.jsonl``, every iteration, on the expert's states):
 ``latent_usage`` (how often each latent is ``z*``), ``policy_latent_usage`` (how often each
@@ -110,6 +111,7 @@ import torch.nn.functional as F
 from torch import nn
 
 import abco_envs
+from abco_data.torch_view import frames_tensor
 from abco_train.config.run import RunConfig
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method
@@ -151,7 +153,7 @@ class ILPO(Method):
         self.images = len(shape) == 3
         # -- the expert pairs and their targets (expert states only: ILPO uses no
         # pre-demonstrations and counts none) ---------------------------------------------------
-        self.expert_obs = torch.from_numpy(data.expert_obs)
+        self.expert_obs = frames_tensor(data.expert_obs)
         self.expert_t = torch.from_numpy(data.expert_t)
         hidden = int(opts.hidden)
         if self.images:
@@ -316,7 +318,7 @@ class ILPO(Method):
         if steps:
             stats.update(self._train_latent_model(steps, policy_steps))
         epsilon = 1.0 if self.remapping.phases == 0 else float(opts.remap_epsilon)
-        if int(opts.remap_steps) > 0:
+        if int(opts.remap_steps) > 0 and self.budget_left != 0:  # none: the budget is spent
             stats.update(self._collect(epsilon))
         stats.update(self.remapping.fit(int(opts.remap_epochs), self._batch_size, self.rng))
         stats["remap_transitions"] = int(len(self.remapping.z))
@@ -324,11 +326,12 @@ class ILPO(Method):
         return stats
 
     def _collect(self, epsilon: float) -> dict[str, float]:
-        """One round of remapping steps (:func:`remapping_steps`), every one counted as
-        ``remapping``; keep ``(s, z*, a)`` of the steps a latent explains (module docstring)."""
+        """One round of remapping steps (:func:`remapping_steps`, at most the budget left),
+        every one counted as ``remapping``; keep ``(s, z*, a)`` of the steps a latent explains
+        (module docstring)."""
         s, s1, actions = remapping_steps(self.config, self.data, self.options,
                                          self.remapping.phases, self.rng, self.act,
-                                         epsilon)  # fmt: skip
+                                         epsilon, self.budget_left)  # fmt: skip
         self.count("remapping", len(actions))
         self.remapping.phases += 1
         z, ratio, _ = self._latents_of(s, s1)

@@ -27,6 +27,7 @@ from typing import Any, ClassVar
 
 import abco_envs
 from abco_data.registry import ACTION_COUNTS
+from abco_train.config.envs import env_spaces
 from abco_train.config.fields import ConfigError, MethodOptions, flag_of, option
 from abco_train.config.limits import MAX_ENVS, MAX_EPOCHS, MAX_LATENTS, MAX_STEPS, MAX_WIDTH
 from abco_train.config.run import RunConfig, env_kind
@@ -107,8 +108,8 @@ class ILPOOptions(MethodOptions):
         defaults = {**OPTION_DEFAULTS[kind], **ENV_OPTION_DEFAULTS.get(name, {})}
         options = cls.resolve(config.method_options, defaults, method)
         options.check(config)
-        if options.latents is None:
-            options.latents = ACTION_COUNTS[name]
+        if options.latents is None:  # the env's actions (another env's: read from it)
+            options.latents = ACTION_COUNTS.get(name) or env_spaces(config.env).n_actions
         if options.remap_max_steps is None and kind == "maze":
             n = abco_envs.maze_size(config.env)
             options.remap_max_steps = 4 * n * n
@@ -151,6 +152,9 @@ OPTION_DEFAULTS: dict[str, dict[str, Any]] = {
     "maze": {**_CLASSIC_DEFAULTS, "train_steps": 1300, "policy_steps": 1000, "hidden": 128,
              "pool": 4, "remap_steps": 1000, "remap_envs": 50, "remap_margin": 0.5},
 }  # fmt: skip
+# Other image envs (any size: MiniGrid's 7x7 view has no pixels to pool): the mazes' settings,
+# the frames unpooled.
+OPTION_DEFAULTS["image"] = {**OPTION_DEFAULTS["maze"], "pool": 1}
 
 #: Per-environment changes on top of :data:`OPTION_DEFAULTS`.
 ENV_OPTION_DEFAULTS: dict[str, dict[str, Any]] = {

@@ -34,9 +34,14 @@ def remapping_steps(
     rng: np.random.Generator,
     act: Callable[[np.ndarray], np.ndarray],
     epsilon: float,
+    limit: int | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``remap_steps`` environment steps (rounded up to whole steps of all ``remap_envs``
     slots): with probability ``epsilon`` a uniformly random action, else ``act``'s.
+
+    With ``limit`` (the run's budget left, at least 1) they are at most ``limit`` steps: at
+    most ``limit`` slots, and the round stops before a step of its slots that would take it
+    over (each slot's move is an interaction); below the limit nothing changes.
 
     The slots are a vector env of their own, reset with a seed drawn from ``rng``; on a maze
     round ``phase`` starts its slots on the next layouts of the train split (cycling), at the
@@ -46,7 +51,7 @@ def remapping_steps(
     Returns:
         ``(s, s', a)`` of every transition taken (CPU tensors; the caller counts them).
     """
-    slots = int(options.remap_envs)
+    slots = int(options.remap_envs) if limit is None else min(int(options.remap_envs), limit)
     kwargs, reset_options = dict(data.env_kwargs), None
     if data.is_maze:
         n = abco_envs.maze_size(config.env)
@@ -58,14 +63,17 @@ def remapping_steps(
     envs = make_vector_env(config.env, slots, kwargs)
     obs, _ = envs.reset(seed=int(rng.integers(0, 2**31 - slots)), options=reset_options)
     resetting = np.zeros(slots, dtype=bool)  # next-step autoreset: that step is no move
-    s_rows, s1_rows, a_rows = [], [], []
+    s_rows, s1_rows, a_rows, taken = [], [], [], 0
     for _ in range(math.ceil(int(options.remap_steps) / slots)):
+        moved = ~resetting
+        taken += int(moved.sum())
+        if limit is not None and taken > limit:
+            break
         explore = rng.random(slots) < epsilon
         random_actions = rng.integers(0, data.n_actions, slots)
         actions = random_actions if explore.all() else np.where(
             explore, random_actions, act(obs))  # fmt: skip
         next_obs, _, terminated, truncated, _ = envs.step(actions)
-        moved = ~resetting
         s_rows.append(obs[moved])
         s1_rows.append(next_obs[moved])
         a_rows.append(actions[moved])

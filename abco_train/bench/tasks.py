@@ -1,0 +1,221 @@
+"""Benchmark tracks: named tasks, each an (environment, setting) pair with an interaction budget.
+
+A track is a TOML file (the built-in ones live in ``abco_train/bench/tracks/``; ``abco bench
+--track headline`` or ``--track my_track.toml``)::
+
+    [track]
+    name = "headline"
+    description = "..."
+    methods = ["random", "expert", "bc", "bco", "abco"]
+    validation_seeds = "100-102"    # choices are made on these
+    test_seeds = "1000-1009"        # run once, after the choices are frozen
+
+    [[task]]
+    name = "cartpole-authors-data"
+    env = "CartPole-v1"
+    budget = 20000                  # environment interactions of a run, all kinds summed
+    headline = "episodes"           # the final-evaluation block the task ranks by
+    measures = "what the task measures"
+    basis = "the paper's or peer's setting that justifies it"
+    settings = { pre_transitions = 10000 }   # run-config fields (abco train's options)
+    [task.method_options.gaifo]     # options of one method on this task (optional)
+    ppo_epochs = 10
+
+A cell of a track's grid is ``(task, method, seed)``; its run folder is
+``OUT/{task}/{method}/seed{seed}`` and its config the task's settings with ``env``, ``task``,
+``budget`` and ``headline`` set, so every record says which task and budget it ran under.
+
+Example:
+    >>> track = load_track("headline")
+    >>> len(track.tasks) >= 7, track.test_seeds
+    (True, '1000-1009')
+    >>> task = track.task(track.tasks[0].name)
+    >>> task.config()["budget"] == task.budget
+    True
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from abco_train.bench.records import RecordError, check_name, escape
+from abco_train.config.fields import ConfigError
+from abco_train.config.limits import MAX_BUDGET
+
+__all__ = ["Task", "Track", "load_track", "TRACKS_DIR", "BUILTIN_TRACKS", "MAX_TASKS",
+           "MAX_TRACK_BYTES"]  # fmt: skip
+
+#: Where the built-in tracks live.
+TRACKS_DIR = Path(__file__).with_name("tracks")
+#: The built-in tracks (``--track NAME``).
+BUILTIN_TRACKS = ("headline",)
+#: Most tasks of a track, and most bytes of a track file (read before parsing).
+MAX_TASKS = 1_000
+MAX_TRACK_BYTES = 1_000_000
+#: Run-config fields a task may not set: the grid sets them per cell.
+_PER_CELL = ("env", "method", "seed", "run_dir", "quiet", "threads", "task", "budget",
+             "headline", "method_options")  # fmt: skip
+_TRACK_KEYS = {"name", "description", "methods", "validation_seeds", "test_seeds"}
+_TASK_KEYS = {"name", "env", "budget", "headline", "measures", "basis", "settings",
+              "method_options"}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Task:
+    """One task of a track: an environment, its settings and its budget.
+
+    Attributes:
+        name: The task's name (its folder under the grid's).
+        env: The environment id.
+        budget: Environment interactions a run may spend, all kinds summed.
+        headline: The final-evaluation block the task ranks by (``None``: the default).
+        measures: What the task measures.
+        basis: The paper's or peer's setting its difficulty comes from.
+        settings: Run-config fields of every run of the task.
+        method_options: Options of single methods on this task, by method name.
+    """
+
+    name: str
+    env: str
+    budget: int
+    headline: str | None = None
+    measures: str = ""
+    basis: str = ""
+    settings: Mapping[str, Any] = field(default_factory=dict)
+    method_options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+
+    def config(self, method: str | None = None) -> dict[str, Any]:
+        """The run-config fields of a run of this task (``method``'s options included)."""
+        options = dict(self.method_options.get(method, {})) if method else {}
+        return {**self.settings, "env": self.env, "task": self.name, "budget": self.budget,
+                **({"headline": self.headline} if self.headline else {}),
+                **({"method_options": options} if options else {})}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Track:
+    """A named set of tasks with its methods and seeds (see the module docstring)."""
+
+    name: str
+    tasks: tuple[Task, ...]
+    description: str = ""
+    methods: tuple[str, ...] = ()
+    validation_seeds: str = ""
+    test_seeds: str = ""
+
+    def task(self, name: str) -> Task:
+        """The task called ``name``.
+
+        Raises:
+            ConfigError: No such task (the message lists the track's).
+        """
+        for task in self.tasks:
+            if task.name == name:
+                return task
+        raise ConfigError(f"track {self.name!r} has no task {escape(name, 60)!r}; its tasks: "
+                          f"{', '.join(t.name for t in self.tasks)}")  # fmt: skip
+
+
+def load_track(name_or_path: str | os.PathLike[str]) -> Track:
+    """A built-in track by name, or a track file.
+
+    Raises:
+        ConfigError: No such track or file, a file too large, not TOML, or a track that does
+            not fit the format (unknown keys, bad names, settings no run config takes).
+    """
+    from abco_train.harness.run_folder import RunFolderError, read_capped
+
+    text = str(name_or_path)
+    path = TRACKS_DIR / f"{text}.toml" if text in BUILTIN_TRACKS else Path(text)
+    try:
+        if path.is_file() and path.stat().st_size > MAX_TRACK_BYTES:
+            raise ConfigError(f"--track {escape(text, 80)} is larger than "
+                              f"{MAX_TRACK_BYTES:,} bytes: no track file")  # fmt: skip
+        raw = read_capped(path, MAX_TRACK_BYTES)
+    except RunFolderError as exc:
+        raise ConfigError(f"--track {escape(text, 80)}: {exc}") from None
+    except OSError as exc:
+        raise ConfigError(f"--track {escape(text, 80)}: cannot read it ({exc.strerror}); "
+                          f"built-in tracks: {', '.join(BUILTIN_TRACKS)}") from None
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover - Python 3.10: the same parser, from PyPI
+        import tomli as tomllib  # pyright: ignore[reportMissingImports]
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ConfigError(f"--track {escape(text, 80)} is not a TOML file: "
+                          f"{escape(exc, 120)}") from None
+    try:
+        return _track(data)
+    except (RecordError, ConfigError, TypeError, ValueError) as exc:
+        raise ConfigError(f"--track {escape(text, 80)}: {escape(exc, 300)}") from None
+
+
+def _known(table: Any, keys: set[str], what: str) -> dict[str, Any]:
+    if not isinstance(table, dict):
+        raise ValueError(f"{what} is not a table")
+    unknown = sorted(set(table) - keys)
+    if unknown:
+        raise ValueError(f"{what} has unknown key(s) {', '.join(map(repr, unknown))}; "
+                         f"known: {', '.join(sorted(keys))}")  # fmt: skip
+    return table
+
+
+def _text(value: Any, what: str, limit: int = 2_000) -> str:
+    if not isinstance(value, str) or len(value) > limit:
+        raise ValueError(f"{what} is not text of at most {limit:,} characters")
+    return value
+
+
+def _track(data: Any) -> Track:
+    head = _known(data.get("track", {}) if isinstance(data, dict) else None, _TRACK_KEYS,
+                  "[track]")  # fmt: skip
+    _known(data, {"track", "task"}, "the file")
+    tasks = data.get("task", [])
+    if not isinstance(tasks, list) or not 0 < len(tasks) <= MAX_TASKS:
+        raise ValueError(f"a track holds 1 to {MAX_TASKS:,} [[task]] tables")
+    methods = head.get("methods", [])
+    if not isinstance(methods, list) or len(methods) > MAX_TASKS:
+        raise ValueError("[track] methods is not a list of names")
+    built = tuple(_task(t, i) for i, t in enumerate(tasks))
+    names = [t.name for t in built]
+    if len(set(names)) != len(names):
+        raise ValueError("two tasks have one name")
+    return Track(
+        name=check_name(head.get("name", "track"), "track name"), tasks=built,
+        description=_text(head.get("description", ""), "[track] description", 20_000),
+        methods=tuple(check_name(m, "method name") for m in methods),
+        validation_seeds=_text(head.get("validation_seeds", ""), "validation_seeds", 200),
+        test_seeds=_text(head.get("test_seeds", ""), "test_seeds", 200),
+    )  # fmt: skip
+
+
+def _task(table: Any, index: int) -> Task:
+    from abco_train.config.run import RunConfig
+
+    where = f"task {index + 1}"
+    t = _known(table, _TASK_KEYS, where)
+    name = check_name(t.get("name"), f"{where}'s name")
+    settings = _known(t.get("settings", {}), set(RunConfig.__dataclass_fields__) - set(_PER_CELL),
+                      f"task {name!r} settings")  # fmt: skip
+    budget = t.get("budget")
+    if isinstance(budget, bool) or not isinstance(budget, int) or not 0 < budget <= MAX_BUDGET:
+        raise ValueError(f"task {name!r} needs a budget from 1 to {MAX_BUDGET:,}")
+    options = t.get("method_options", {})
+    if not isinstance(options, dict) or not all(isinstance(v, dict) for v in options.values()):
+        raise ValueError(f"task {name!r} method_options is not a table of tables")
+    headline = t.get("headline")
+    task = Task(name=name, env=_text(t.get("env"), f"task {name!r} env", 200), budget=budget,
+                headline=None if headline is None else _text(headline, "headline", 100),
+                measures=_text(t.get("measures", ""), "measures"),
+                basis=_text(t.get("basis", ""), "basis"), settings=dict(settings),
+                method_options={check_name(m, "method name"): dict(o)
+                                for m, o in options.items()})  # fmt: skip
+    RunConfig(**task.config()).validate()  # the env, the settings' types and bounds, headline
+    return task

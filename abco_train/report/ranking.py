@@ -1,0 +1,228 @@
+"""The benchmark track over its tasks: aggregates of the IfO methods, and which ones it tells
+apart.
+
+Each of the seven IfO methods (:data:`~abco_train.report.headline.IFO_METHODS`) with scored
+runs on every task enters as a (runs x tasks) matrix of its runs' headline scores (a method
+with unequal runs across tasks keeps its ``n`` lowest-numbered seeds on every task, ``n`` its
+fewest on any; :func:`abco_train.report.aggregates.score_matrices`). With ``rliable``
+(``pip install "abco[stats]"``), as the paper track's aggregates:
+
+* IQM and optimality gap (``rliable.metrics.aggregate_iqm`` / ``aggregate_optimality_gap``,
+  gamma 1: the expert) with 95% stratified bootstrap intervals (runs resampled within each
+  task), and performance profiles;
+* for each of the 21 pairs, the probability of improvement P(X > Y) (a run of X beats a run of
+  Y on the same task, ties half, averaged over tasks) with its stratified independent
+  bootstrap interval, and a verdict (:func:`verdict`): ``separated`` when the interval
+  excludes 0.5, else ``tied``.
+
+Example:
+    >>> verdict(0.62, 0.81), verdict(0.35, 0.66), verdict(0.5, 0.7)
+    ('separated', 'tied', 'tied')
+    >>> ahead = standings({("abco", "bco"): (0.75, 0.6, 0.9), ("abco", "iupe"): (0.5, 0.3, 0.7)})
+    >>> ahead["abco"], ahead["bco"]
+    (([('bco', 0.75)], [], [('iupe', 0.5)]), ([], [('abco', 0.25)], []))
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from abco_train.report import aggregates
+from abco_train.report.headline import IFO_METHODS
+
+__all__ = ["EVEN", "PROFILE_PNG", "Interval", "verdict", "standings", "Ranking", "compute",
+           "section"]  # fmt: skip
+
+#: P(X > Y) of two methods the benchmark cannot tell apart.
+EVEN = 0.5
+PROFILE_PNG = "headline_profile.png"
+
+#: ``(point, low, high)``.
+Interval = tuple[float, float, float]
+Scores = Mapping[str, Mapping[str, Mapping[int, float]]]  # method -> task -> seed -> score
+
+
+def verdict(low: float, high: float, even: float = EVEN) -> str:
+    """``separated`` when the interval ``[low, high]`` of P(X > Y) excludes ``even`` (one
+    method is ahead), else ``tied`` (an interval that reaches 0.5 is tied)."""
+    return "separated" if low > even or high < even else "tied"
+
+
+def standings(pairs: Mapping[tuple[str, str], Interval]
+              ) -> dict[str, tuple[list[tuple[str, float]], ...]]:  # fmt: skip
+    """Per method: the methods it is ahead of, behind, and tied with, each with its P(method >
+    other), from the pairs' ``P(X > Y)`` intervals (in the pairs' order)."""
+    out: dict[str, tuple[list[tuple[str, float]], ...]] = {}
+    for (x, y), (p, low, high) in pairs.items():
+        for m in (x, y):
+            out.setdefault(m, ([], [], []))
+        if verdict(low, high) == "tied":
+            out[x][2].append((y, p))
+            out[y][2].append((x, 1.0 - p))
+        else:
+            winner, loser = (x, y) if low > EVEN else (y, x)
+            p_win = p if winner == x else 1.0 - p
+            out[winner][0].append((loser, p_win))
+            out[loser][1].append((winner, 1.0 - p_win))
+    return out
+
+
+@dataclass
+class Ranking:
+    """The benchmark track's aggregates: ``(point, low, high)`` per method or pair."""
+
+    matrices: dict[str, np.ndarray]
+    dropped: dict[str, int]
+    left_out: dict[str, list[str]]
+    iqm: dict[str, Interval] = field(default_factory=dict)
+    gap: dict[str, Interval] = field(default_factory=dict)
+    mean: dict[str, Interval] = field(default_factory=dict)
+    profiles: dict[str, np.ndarray] = field(default_factory=dict)
+    profile_cis: dict[str, np.ndarray] = field(default_factory=dict)
+    taus: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    pairs: dict[tuple[str, str], Interval] = field(default_factory=dict)
+
+
+def compute(scores: Scores, tasks: Sequence[str], rl: SimpleNamespace, reps: int | None = None
+            ) -> Ranking:  # fmt: skip
+    """IQM, optimality gap, mean, performance profiles and the pairs' P(X > Y) of the IfO
+    methods in ``scores`` (others are ignored), each bootstrap seeded (numpy seed 0)."""
+    reps = int(reps or aggregates.REPS)
+    ifo = {m: scores[m] for m in IFO_METHODS if m in scores}
+    matrices, dropped, left_out = aggregates.score_matrices(ifo, tasks)
+    out = Ranking(matrices, dropped, left_out)
+    if not matrices:
+        return out
+    metrics = rl.metrics
+    with aggregates.seeded(aggregates.SEED):
+        point, ci = rl.library.get_interval_estimates(
+            matrices, lambda x: np.array([metrics.aggregate_iqm(x),
+                                          metrics.aggregate_optimality_gap(x, 1.0),
+                                          metrics.aggregate_mean(x)]), reps=reps)  # fmt: skip
+    for m in matrices:
+        out.iqm[m], out.gap[m], out.mean[m] = (
+            (float(point[m][k]), float(ci[m][0, k]), float(ci[m][1, k])) for k in range(3))
+    out.taus = aggregates.profile_taus(matrices)
+    with aggregates.seeded(aggregates.SEED):
+        out.profiles, out.profile_cis = rl.library.create_performance_profile(
+            matrices, out.taus, reps=reps)  # fmt: skip
+    pairs = {f"{x} > {y}": [matrices[x], matrices[y]]
+             for x, y in itertools.combinations(list(matrices), 2)}  # fmt: skip
+    if pairs:
+        with aggregates.seeded(aggregates.SEED):
+            _, ci = rl.library.get_interval_estimates(
+                pairs, lambda x, y: np.array([aggregates.probability_of_improvement(x, y)]),
+                reps=reps)  # fmt: skip
+        for key, (x, y) in pairs.items():
+            p = float(metrics.probability_of_improvement(x, y))
+            a, b = key.split(" > ")
+            out.pairs[(a, b)] = (p, float(ci[key][0, 0]), float(ci[key][1, 0]))
+    return out
+
+
+def _fmt(x: Interval) -> str:
+    return f"{x[0]:.3f} [{x[1]:.3f}, {x[2]:.3f}]"
+
+
+def section(scores: Scores, tasks: Sequence[str], out: Path, labels: Mapping[str, str],
+            csv_rows: list[dict[str, Any]], older: int = 0, reps: int | None = None,
+            ) -> tuple[list[str], Path | None]:  # fmt: skip
+    """The aggregates and the pairwise sections (Markdown lines, CSV rows appended to
+    ``csv_rows``) and the performance profiles' plot (``None``: not drawn).
+
+    Args:
+        scores: ``method -> task -> seed -> score`` of the scored runs.
+        tasks: The benchmark track's tasks.
+        older: Finished runs without a score (older records), left out.
+    """
+    n = len(tasks)
+    head = [f"## Aggregates over the {n} task(s): the seven IfO methods", ""]
+    pair_head = ["## Pairwise: which IfO methods the benchmark tells apart", ""]
+    lines = [f"Each IfO method ({', '.join(IFO_METHODS)}) with scored runs on every task enters"
+             f" as a (runs x {n} tasks) matrix of headline scores; BC, the references and any"
+             " other method do not. A method with unequal runs across tasks keeps its n"
+             " lowest-numbered seeds on every task (n: its fewest on any). Intervals: 95%"
+             f" stratified bootstrap ({int(reps or aggregates.REPS):,} replicates, runs resampled"
+             " within each task, numpy seed 0) by `rliable`.", ""]  # fmt: skip
+    if older:
+        lines.append(f"- left out: {older} finished run(s) without a score (older records)")
+    missing = [m for m in IFO_METHODS if m not in scores]
+    if missing:
+        lines.append(f"- not in the benchmark track: {', '.join(missing)}")
+    rl, why = aggregates.load_rliable()
+    if rl is None:
+        note = (f"Not computed: {why}. `{aggregates.INSTALL_HINT}` adds the IQM, optimality gap"
+                " and probability of improvement with stratified bootstrap intervals.")
+        return [*head, *lines, "", note, "", *pair_head, note], None
+    ranking = compute(scores, tasks, rl, reps)
+    for m, lacking in ranking.left_out.items():
+        lines.append(f"- left out: {m} (no scored run on {', '.join(lacking)})")
+    if not ranking.matrices:
+        return [*head, *lines, "", "No IfO method has scored runs on every task.", "",
+                *pair_head, "Nothing to compare."], None  # fmt: skip
+    lines += _aggregate_table(ranking, labels, n, csv_rows)
+    png = aggregates.plot_profiles(
+        ranking.profiles, ranking.profile_cis, ranking.taus, rl, labels, out / PROFILE_PNG,
+        "score", f"Performance profiles of the headline score over {n} task(s) (95%"
+        " stratified bootstrap bands)", 1.0)  # fmt: skip
+    lines += ["", f"![Performance profiles: fraction of runs with score > tau]({png.name})"]
+    return [*head, *lines, "", *pair_head, *_pair_lines(ranking, labels, n, csv_rows)], png
+
+
+def _aggregate_table(ranking: Ranking, labels: Mapping[str, str], n: int,
+                     csv_rows: list[dict[str, Any]]) -> list[str]:  # fmt: skip
+    """The methods by IQM (best first): IQM and optimality gap with their intervals."""
+    lines = ["", "| Rank | Method | Runs per task | IQM of score [95% CI] |"
+             " Optimality gap [95% CI] |", "|---|---|---|---|---|"]  # fmt: skip
+    order = sorted(ranking.matrices, key=lambda m: -ranking.iqm[m][0])
+    for rank, m in enumerate(order, 1):
+        x = ranking.matrices[m]
+        runs = str(x.shape[0]) + (f" ({ranking.dropped[m]} dropped)" if ranking.dropped[m] else "")
+        lines.append(f"| {rank} | {labels.get(m, m)} | {runs} | {_fmt(ranking.iqm[m])} |"
+                     f" {_fmt(ranking.gap[m])} |")  # fmt: skip
+        base = {"table": "headline-aggregate", "env": f"all {n} tasks", "method": m,
+                "evaluation": "headline", "seeds": x.shape[0], "paper": ""}  # fmt: skip
+        mean, iqm, gap = ranking.mean[m], ranking.iqm[m], ranking.gap[m]
+        csv_rows.append({**base, "metric": "score", "mean": mean[0], "ci_low": mean[1],
+                         "ci_high": mean[2], "iqm": iqm[0], "iqm_ci_low": iqm[1],
+                         "iqm_ci_high": iqm[2]})  # fmt: skip
+        csv_rows.append({**base, "metric": "optimality_gap", "mean": gap[0], "ci_low": gap[1],
+                         "ci_high": gap[2]})  # fmt: skip
+    lines += ["", "IQM: the mean of the middle 50% of all runs' scores over all tasks. Optimality"
+              " gap: the mean of max(1 - score, 0), how far the runs fall short of the expert"
+              " (lower is better)."]  # fmt: skip
+    return lines
+
+
+def _pair_lines(ranking: Ranking, labels: Mapping[str, str], n: int,
+                csv_rows: list[dict[str, Any]]) -> list[str]:  # fmt: skip
+    """The pairs' table (P(X > Y), its interval, the verdict), then one line per method."""
+    if not ranking.pairs:
+        return ["Only one IfO method has scored runs on every task: nothing to compare."]
+    lines = ["P(X > Y): the probability that a run of X beats a run of Y on the same task (ties"
+             " count half), averaged over tasks; 0.5: no difference. Separated: the 95% interval"
+             " excludes 0.5; tied: it does not (an interval that reaches 0.5 is tied).", "",
+             "| X | Y | P(X > Y) [95% CI] | Verdict |", "|---|---|---|---|"]  # fmt: skip
+    for (x, y), p in ranking.pairs.items():
+        judged = verdict(p[1], p[2])
+        if judged == "separated":
+            judged += f": {labels.get(x, x) if p[1] > EVEN else labels.get(y, y)} ahead"
+        lines.append(f"| {labels.get(x, x)} | {labels.get(y, y)} | {_fmt(p)} | {judged} |")
+        csv_rows.append({"table": "pairwise", "env": f"all {n} tasks", "method": x,
+                         "evaluation": "headline", "metric": f"probability_of_improvement_over_{y}",
+                         "seeds": ranking.matrices[x].shape[0], "mean": p[0], "ci_low": p[1],
+                         "ci_high": p[2], "paper": ""})  # fmt: skip
+    lines += ["", "Per method (`name`: P(it beats the other)):", ""]
+    for m, (ahead, behind, tied) in standings(ranking.pairs).items():
+        parts = [f"{word} {', '.join(f'`{o}` {p:.2f}' for o, p in group)}"
+                 for word, group in (("ahead of", ahead), ("behind", behind),
+                                     ("tied with", tied)) if group]  # fmt: skip
+        lines.append(f"- {labels.get(m, m)} (`{m}`): {'; '.join(parts)}.")
+    return lines

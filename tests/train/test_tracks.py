@@ -1,0 +1,133 @@
+"""Benchmark tracks: the built-in headline track, track files and their refusals, the cells of
+a track's grid and their configs, and ``abco bench --track`` end to end on a tiny track."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import abco_envs
+from abco_train.bench.cells import cell_config, plan_track
+from abco_train.bench.tasks import MAX_TRACK_BYTES, load_track
+from abco_train.config.run import ConfigError, RunConfig
+
+IFO = ("bco", "bco-alpha", "bco-alpha-torabi", "abco", "iupe", "ilpo", "gaifo")
+
+
+def test_headline_track_covers_every_environment():
+    track = load_track("headline")
+    envs = [t.env for t in track.tasks]
+    assert len(track.tasks) >= 7
+    assert set(envs) == {*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS}
+    assert {"random", "expert", "bc", *IFO} <= set(track.methods)
+    assert track.validation_seeds and track.test_seeds
+    for task in track.tasks:
+        assert task.measures and task.basis, task.name
+        cfg = RunConfig(**task.config()).validate()
+        assert cfg.budget == task.budget and cfg.task == task.name
+
+
+def test_headline_budgets_follow_one_rule():
+    """budget = 10,000 x |A|, at most half of it as pre-demonstrations (the protocol's rule;
+    Acrobot's task takes ten random episodes' worth, less)."""
+    import gymnasium as gym
+
+    for task in load_track("headline").tasks:
+        if task.env in abco_envs.CLASSIC_IDS:
+            env = gym.make(task.env)
+            actions = int(env.action_space.n)  # type: ignore[attr-defined]
+            env.close()
+        else:
+            actions = 4
+        assert task.budget == 10_000 * actions, task.name
+        assert 0 < task.settings["pre_transitions"] <= 5_000 * actions, task.name
+
+
+def _write(tmp_path: Path, text: str) -> str:
+    path = tmp_path / "track.toml"
+    path.write_text(text)
+    return str(path)
+
+
+GOOD = """
+[track]
+name = "t"
+methods = ["random", "bco"]
+validation_seeds = "100"
+[[task]]
+name = "cp"
+env = "CartPole-v1"
+budget = 100
+"""
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("budget = 100", "budget = 0", "needs a budget"),
+    ("budget = 100", "budget = 100\nsettings = { colour = 1 }", "unknown key(s) 'colour'"),
+    ("budget = 100", "budget = 100\nsettings = { seed = 1 }", "unknown key(s) 'seed'"),
+    ("budget = 100", "budget = 100\nsettings = { batch_size = 0 }", "--batch-size must be"),
+    ("budget = 100", "budget = 100\nheadline = 'test/paper'", "--headline must be one of"),
+    ('env = "CartPole-v1"', 'env = "Pong-v9"', "unknown env id"),
+    ('name = "cp"', 'name = "a/b"', "name"),
+    ("budget = 100", "budget = 100\ncolour = 1", "unknown key(s) 'colour'"),
+    ("[[task]]", "[[task]\n", "not a TOML file"),
+])  # fmt: skip
+def test_track_file_refusals(tmp_path, old, new, message):
+    path = _write(tmp_path, GOOD.replace(old, new, 1))
+    with pytest.raises(ConfigError) as info:
+        load_track(path)
+    assert message in str(info.value) and "\n" not in str(info.value)
+
+
+def test_missing_and_oversized_track_files(tmp_path):
+    with pytest.raises(ConfigError, match="cannot read it"):
+        load_track(tmp_path / "none.toml")
+    big = tmp_path / "big.toml"
+    big.write_bytes(b"#" * (MAX_TRACK_BYTES + 1))
+    with pytest.raises(ConfigError, match="larger"):
+        load_track(big)
+
+
+def test_track_cells_and_their_configs(tmp_path):
+    track = load_track(_write(tmp_path, GOOD + """
+[task.method_options.bco]
+idm_epochs = 3
+"""))
+    cells = plan_track(track, [], ["random", "bco"], [100, 101])
+    assert [c.key for c in cells] == ["cp/random/seed100", "cp/random/seed101",
+                                      "cp/bco/seed100", "cp/bco/seed101"]  # fmt: skip
+    assert cells[0].ident == ("cp", "random", 100, None)
+    cfg = cell_config(cells[2], tmp_path / "out", {"eval_episodes": 3}, track=track)
+    assert (cfg["task"], cfg["budget"], cfg["env"], cfg["eval_episodes"]) == \
+        ("cp", 100, "CartPole-v1", 3)  # fmt: skip
+    assert cfg["method_options"] == {"idm_epochs": 3}
+    assert cell_config(cells[0], tmp_path, track=track)["method_options"] == {}
+    with pytest.raises(ConfigError, match="fixes budget"):
+        cell_config(cells[0], tmp_path, {"budget": 5}, track=track)
+    with pytest.raises(ConfigError, match="no task 'other'"):
+        plan_track(track, ["other"], ["bco"], [0])
+
+
+def test_bench_runs_a_track(tmp_path):
+    track = _write(tmp_path, GOOD.replace('methods = ["random", "bco"]',
+                                          'methods = ["random", "expert"]'))  # fmt: skip
+    out = tmp_path / "grid"
+    run = subprocess.run(
+        [sys.executable, "-m", "abco_train", "bench", "--track", track, "--out", str(out),
+         "--eval-episodes", "3", "--quiet"],
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    finals = sorted(out.glob("cp/*/seed100/final.json"))
+    assert [p.parts[-3] for p in finals] == ["expert", "random"]
+    record = json.loads(finals[0].read_text())
+    assert (record["task"], record["budget"], record["headline"]) == ("cp", 100, "episodes")
+    both = subprocess.run(
+        [sys.executable, "-m", "abco_train", "bench", "--track", track, "--envs",
+         "CartPole-v1", "--out", str(out)], capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert both.returncode == 2 and "give --envs" in both.stderr
