@@ -143,7 +143,7 @@ def format_table(final: dict[str, Any]) -> str:
     lines = [run,
              f"{'evaluation':<18}{'score':>8}{'P':>8}{'AER':>10}{'success':>9}{'episodes':>10}"]
     for key, m in rows:
-        shown = f"{m['score']:>8.3f}" if "score" in m else f"{'-':>8}"
+        shown = f"{m['score']:>8.3f}" if m.get("score") is not None else f"{'-':>8}"
         mark = " *" if key == final.get("headline") else ""
         lines.append(f"{key:<18}{shown}{m['performance']:>8.3f}{m['aer']:>10.3f}"
                      f"{m['success_rate']:>9.2f}{m['episodes']:>10d}{mark}")

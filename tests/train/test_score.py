@@ -102,3 +102,12 @@ def test_code_version_follows_code_not_docstrings(tmp_path):
     assert source_digest(tmp_path) == before  # the report never changes a number
     target.write_text(text + "\nEXTRA = 1\n")
     assert source_digest(tmp_path) != before  # code that trains or evaluates
+
+
+def test_an_undefined_score_is_shown_as_a_dash():
+    """A step cap no expert finishes within leaves the score undefined (``None``), never a
+    crash of the run's table."""
+    block = {"performance": 0.5, "aer": 1.0, "success_rate": 0.0, "episodes": 2, "score": None}
+    table = format_table({"env": "MountainCar-v0", "method": "bco", "seed": 0,
+                          "episodes": block, "headline": "episodes"})  # fmt: skip
+    assert table.splitlines()[2].split()[:2] == ["episodes", "-"]
