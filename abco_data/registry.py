@@ -89,8 +89,8 @@ _MAZE_PRE_START = {**_MAZE_PRE, "episodes_per_layout": 40, "drop_wall_hits": Tru
 #: one. Two random walks of at most 10 steps per layout (the standard ``-pre-`` walks, wall
 #: hits kept): about 19 transitions a layout, so the first 1,000 layouts hold as many as the
 #: standard 100-layout ``-pre-`` dataset, and all 10,000 about as many as the expert file;
-#: the trainer decodes whole files into memory (12 KiB a 64x64 frame), which 20 walks a
-#: layout would take past 25 GB on 10x10.
+#: a reader that decodes whole files needs 12 KiB a 64x64 frame, which 20 walks a layout
+#: would take past 25 GB on 10x10 (the trainer draws frames per minibatch instead).
 _MAZE_PROCEDURAL_EXPERT = {**_MAZE_EXPERT, "layouts": PROCEDURAL_SPLIT_SIZE,
                            "solutions_per_layout": 1, "split": "procedural"}
 _MAZE_PROCEDURAL_PRE = {**_MAZE_PRE, "layouts": PROCEDURAL_SPLIT_SIZE, "episodes_per_layout": 2,

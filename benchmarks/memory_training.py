@@ -4,11 +4,15 @@ Each run is the ``abco train`` command line in a fresh process and a fresh run f
 
     abco train --env AbcoMaze5x5-v0 --layouts 10000 --preset general
 
-Its peak resident set size comes from the kernel's accounting of the finished child
-(``os.wait4``: ``ru_maxrss``), its wall time from process start to exit, its CPU time (user
-and system: on a shared machine, steadier than wall time), and its training time per iteration
-from the run's ``metrics.jsonl`` (``seconds_train``, evaluation excluded). The datasets are
-fetched or generated before the clock starts.
+Its peak resident set size is the kernel's high-water mark of the child's memory
+(``VmHWM`` of ``/proc/PID/status``, read every 0.2 s; it only grows, so the last reading is the
+peak), printed with the time it was reached. Not ``ru_maxrss``: a child started by
+``subprocess`` inherits the launching process's peak there (the memory it had before ``exec``);
+where ``/proc`` is missing (macOS) that is the figure, with that caveat. The wall time runs from
+process start to exit, the CPU time (user and system: on a shared machine, steadier than wall
+time) comes from ``os.wait4``, and the training time per iteration from the run's
+``metrics.jsonl`` (``seconds_train``, evaluation excluded). The datasets are fetched or
+generated before the clock starts.
 
 ``--baseline DIR`` runs the same commands on another checkout of abco as well (a ``git
 worktree`` of an earlier commit, say), one run at a time, and prints this checkout's figures
@@ -67,7 +71,15 @@ def measure(code: Path, env: str, args: argparse.Namespace, run_dir: Path,
         [str(code), *filter(None, [os.environ.get("PYTHONPATH")])])}
     start = time.perf_counter()
     child = subprocess.Popen(cmd, env=environ, stdout=subprocess.DEVNULL)
-    _, status, usage = os.wait4(child.pid, 0)
+    peak, peak_at = 0, 0.0
+    while True:
+        pid, status, usage = os.wait4(child.pid, os.WNOHANG)
+        if pid:
+            break
+        now = high_water(child.pid)
+        if now > peak:
+            peak, peak_at = now, time.perf_counter() - start
+        time.sleep(0.2)
     seconds = time.perf_counter() - start
     child.returncode = os.waitstatus_to_exitcode(status)  # reaped here, not by Popen
     train = []
@@ -75,11 +87,22 @@ def measure(code: Path, env: str, args: argparse.Namespace, run_dir: Path,
     if metrics.exists():
         train = [json.loads(line)["seconds_train"] for line in metrics.read_text().splitlines()
                  if line.strip()]  # fmt: skip
-    # ru_maxrss is in KiB on Linux (bytes on macOS)
-    scale = 1 if sys.platform == "darwin" else 1024
-    return {"rss": usage.ru_maxrss * scale, "seconds": seconds, "code": child.returncode,
+    if not peak:  # no /proc: ru_maxrss (bytes on macOS), which counts the launcher's too
+        peak, peak_at = usage.ru_maxrss * (1 if sys.platform == "darwin" else 1024), seconds
+    return {"rss": peak, "peak_at": peak_at, "seconds": seconds, "code": child.returncode,
             "cpu": usage.ru_utime + usage.ru_stime,
             "iterations": len(train), "train_per_iter": sum(train) / max(len(train), 1)}
+
+
+def high_water(pid: int) -> int:
+    """Peak resident bytes of process ``pid`` so far (``VmHWM``), or 0 where unreadable."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0
 
 
 def tiny_files(root: Path, env: str) -> dict[str, str]:
@@ -109,8 +132,8 @@ def fetch(env: str, cache_dir: str | None) -> None:
 
 def row(label: str, m: dict[str, float | int]) -> str:
     failed = "" if m["code"] == 0 else f"  (exit {m['code']})"
-    return (f"{label:<30}{m['rss'] / 2**30:>10.2f}{m['seconds']:>9.0f}{m['cpu']:>8.0f}"
-            f"{m['iterations']:>6}{m['train_per_iter']:>13.1f}{failed}")
+    return (f"{label:<30}{m['rss'] / 2**30:>10.2f}{m['peak_at']:>9.0f}{m['seconds']:>9.0f}"
+            f"{m['cpu']:>8.0f}{m['iterations']:>6}{m['train_per_iter']:>13.1f}{failed}")
 
 
 def run_all(envs: list[str], checkouts: list[tuple[str, Path]], args: argparse.Namespace,
@@ -172,8 +195,8 @@ def main() -> int:
         checkouts.insert(0, ("baseline", Path(args.baseline).resolve()))
     print(f"abco train --layouts {args.layouts} --preset {args.preset} --method {args.method}"
           f" {args.train_args}; {os.cpu_count()} CPUs")
-    print(f"{'env / checkout':<30}{'peak GiB':>10}{'wall s':>9}{'CPU s':>8}{'iters':>6}"
-          f"{'train s/iter':>13}")
+    print(f"{'env / checkout':<30}{'peak GiB':>10}{'at s':>9}{'wall s':>9}{'CPU s':>8}"
+          f"{'iters':>6}{'train s/iter':>13}")
     try:
         failed, missed = run_all(envs, checkouts, args, scratch)
     finally:
