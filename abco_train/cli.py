@@ -259,8 +259,27 @@ def _builtin_names() -> set[str]:
 def _report(args: argparse.Namespace) -> int:
     from abco_train.report.write import write_report
 
-    files = write_report(args.runs_dir, args.out, args.labels_env, args.baseline)
+    if args.tuning is not None:
+        return _tuning(args)
+    if args.track is not None:
+        raise ConfigError("--track names the track of a --tuning record")
+    files = write_report(args.runs_dir, args.out, args.labels_env, args.baseline,
+                         args.budget_curves)  # fmt: skip
     print(f"report: {files['report']}\ncsv: {files['csv']}")
+    return 0
+
+
+def _tuning(args: argparse.Namespace) -> int:
+    from abco_train.bench.cells import parse_list, parse_seeds
+    from abco_train.bench.tasks import load_track
+    from abco_train.report.tuning import write_tuning
+
+    track = load_track(args.track or "headline")
+    if not track.validation_seeds:
+        raise ConfigError(f"track {track.name} names no validation seeds")
+    files = write_tuning(args.runs_dir, parse_list(args.tuning), track,
+                         parse_seeds(track.validation_seeds), args.out)  # fmt: skip
+    print(f"tuning record: {files['record']}\nchoices: {files['choices']}")
     return 0
 
 
@@ -272,6 +291,14 @@ def _report_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--baseline", default=None, metavar="METHOD",
                         help="reference method of the probability of improvement (default"
                         " abco); must be a method of the grid")  # fmt: skip
+    parser.add_argument("--budget-curves", default=None, metavar="CURVES_DIR",
+                        help="a grid of budget variants of the track's tasks (TASK@xMULTIPLE):"
+                        " their score-against-budget curves, the 1x points from RUNS_DIR")
+    parser.add_argument("--tuning", default=None, metavar="CONFIG[,CONFIG...]",
+                        help="write the tuning record of RUNS_DIR instead: one validation grid"
+                        " per configuration in RUNS_DIR/CONFIG, the defaults first")
+    parser.add_argument("--track", default=None, metavar="NAME|FILE.toml",
+                        help="the track of --tuning (default headline)")
 
 
 # -- abco convert-checkpoint -----------------------------------------------------------------

@@ -18,12 +18,15 @@ A track is a TOML file (the built-in ones live in ``abco_train/bench/tracks/``; 
     measures = "what the task measures"
     basis = "the paper's or peer's setting that justifies it"
     settings = { pre_transitions = 10000 }   # run-config fields (abco train's options)
+    [task.method_settings.bco]      # run-config fields of one method on this task (optional)
+    lr = 0.001
     [task.method_options.gaifo]     # options of one method on this task (optional)
     ppo_epochs = 10
 
 A cell of a track's grid is ``(task, method, seed)``; its run folder is
-``OUT/{task}/{method}/seed{seed}`` and its config the task's settings with ``env``, ``task``,
-``budget`` and ``headline`` set, so every record says which task and budget it ran under.
+``OUT/{task}/{method}/seed{seed}`` and its config the task's settings (and the method's
+``method_settings`` on top) with ``env``, ``task``, ``budget`` and ``headline`` set, so
+every record says which task and budget it ran under.
 
 Example:
     >>> track = load_track("headline")
@@ -62,7 +65,7 @@ _PER_CELL = ("env", "method", "seed", "run_dir", "quiet", "threads", "task", "bu
              "headline", "method_options")  # fmt: skip
 _TRACK_KEYS = {"name", "description", "methods", "validation_seeds", "test_seeds"}
 _TASK_KEYS = {"name", "env", "budget", "headline", "measures", "basis", "settings",
-              "method_options"}  # fmt: skip
+              "method_settings", "method_options"}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -77,6 +80,8 @@ class Task:
         measures: What the task measures.
         basis: The paper's or peer's setting its difficulty comes from.
         settings: Run-config fields of every run of the task.
+        method_settings: Run-config fields of single methods' runs (on top of ``settings``),
+            by method name: e.g. a learning rate chosen for one method.
         method_options: Options of single methods on this task, by method name.
     """
 
@@ -87,12 +92,14 @@ class Task:
     measures: str = ""
     basis: str = ""
     settings: Mapping[str, Any] = field(default_factory=dict)
+    method_settings: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     method_options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     def config(self, method: str | None = None) -> dict[str, Any]:
         """The run-config fields of a run of this task (``method``'s options included)."""
         options = dict(self.method_options.get(method, {})) if method else {}
-        return {**self.settings, "env": self.env, "task": self.name, "budget": self.budget,
+        own = dict(self.method_settings.get(method, {})) if method else {}
+        return {**self.settings, **own, "env": self.env, "task": self.name, "budget": self.budget,
                 **({"headline": self.headline} if self.headline else {}),
                 **({"method_options": options} if options else {})}  # fmt: skip
 
@@ -202,20 +209,28 @@ def _task(table: Any, index: int) -> Task:
     where = f"task {index + 1}"
     t = _known(table, _TASK_KEYS, where)
     name = check_name(t.get("name"), f"{where}'s name")
-    settings = _known(t.get("settings", {}), set(RunConfig.__dataclass_fields__) - set(_PER_CELL),
-                      f"task {name!r} settings")  # fmt: skip
+    settings_keys = set(RunConfig.__dataclass_fields__) - set(_PER_CELL)
+    settings = _known(t.get("settings", {}), settings_keys, f"task {name!r} settings")
     budget = t.get("budget")
     if isinstance(budget, bool) or not isinstance(budget, int) or not 0 < budget <= MAX_BUDGET:
         raise ValueError(f"task {name!r} needs a budget from 1 to {MAX_BUDGET:,}")
     options = t.get("method_options", {})
     if not isinstance(options, dict) or not all(isinstance(v, dict) for v in options.values()):
         raise ValueError(f"task {name!r} method_options is not a table of tables")
+    own = t.get("method_settings", {})
+    if not isinstance(own, dict):
+        raise ValueError(f"task {name!r} method_settings is not a table of tables")
+    own = {check_name(m, "method name"): _known(v, set(settings_keys), f"task {name!r} "
+           f"method_settings.{m}") for m, v in own.items()}  # fmt: skip
     headline = t.get("headline")
     task = Task(name=name, env=_text(t.get("env"), f"task {name!r} env", 200), budget=budget,
                 headline=None if headline is None else _text(headline, "headline", 100),
                 measures=_text(t.get("measures", ""), "measures"),
                 basis=_text(t.get("basis", ""), "basis"), settings=dict(settings),
+                method_settings={m: dict(v) for m, v in own.items()},
                 method_options={check_name(m, "method name"): dict(o)
                                 for m, o in options.items()})  # fmt: skip
     RunConfig(**task.config()).validate()  # the env, the settings' types and bounds, headline
+    for method in task.method_settings:
+        RunConfig(**{**task.config(method), "method_options": {}}).validate()
     return task

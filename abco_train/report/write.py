@@ -40,6 +40,7 @@ from abco_train.bench.records import RecordError, Skipped, check_config, escape,
 from abco_train.harness.run_folder import CONFIG, write_atomic
 from abco_train.methods.base import INTERACTION_KINDS
 from abco_train.report import aggregates as aggregate
+from abco_train.report import budget_curves as curves
 from abco_train.report import generalisation, headline, provenance, ranking, tables
 from abco_train.report.plots import plot_label_distributions, plot_performance
 from abco_train.report.published import PAPER_TABLE2, published
@@ -121,7 +122,7 @@ def _intro(grid: Grid, skipped: list[Skipped]) -> list[str]:
 
 def write_report(runs_dir: str | Path, out: str | Path | None = None,
                  labels_env: str = TABLE2_ENV, baseline: str | None = None,
-                 ) -> dict[str, Path]:  # fmt: skip
+                 budget_curves: str | Path | None = None) -> dict[str, Path]:  # fmt: skip
     """Write ``report.md``, ``results.csv`` and the plots of the grid in ``runs_dir``.
 
     Args:
@@ -130,10 +131,14 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
         labels_env: Env of the IDM label-distribution plot (the paper's Figure 4: 5x5 maze).
         baseline: Reference method of the probability of improvement (default ``abco``; a
             name given must be a method of the grid).
+        budget_curves: A grid of budget variants of the benchmark's tasks (tasks named
+            ``{task}@x{multiple}``; :mod:`abco_train.report.budget_curves`): their curves,
+            with the 1x points from ``runs_dir``, follow the benchmark track.
 
     Returns:
         The written files by name (``report``, ``csv``, and the plots that had data:
-        ``headline_profile``, ``performance``, ``labels``, ``profile``, ``generalisation``).
+        ``headline_profile``, ``budget_curves``, ``performance``, ``labels``, ``profile``,
+        ``generalisation``).
 
     Every file is first written into a hidden staging folder in ``out``, then moved into
     place once all were written: a report that fails (a full or read-only disk) leaves the
@@ -158,7 +163,8 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
     stage = temporary_name(out / STAGING, "staging")  # every file first here, then moved
     stage.mkdir()
     try:
-        md, csv_rows, files = _compose(runs_dir, runs, skipped, stage, labels_env, baseline)
+        md, csv_rows, files = _compose(runs_dir, runs, skipped, stage, labels_env, baseline,
+                                       budget_curves)  # fmt: skip
         _write(stage, md, csv_rows, files)
         return _publish(stage, out, files)
     finally:
@@ -166,7 +172,7 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
 
 
 def _compose(runs_dir: Path, runs: list[Run], skipped: list[Skipped], out: Path,
-             labels_env: str, baseline: str
+             labels_env: str, baseline: str, budget_curves: str | Path | None = None
              ) -> tuple[list[str], list[dict[str, Any]], dict[str, Path]]:  # fmt: skip
     """The report's Markdown lines, its CSV rows, and its plots (drawn into ``out``): the
     benchmark track (records with a task) first, then the paper track (records without)."""
@@ -183,6 +189,13 @@ def _compose(runs_dir: Path, runs: list[Run], skipped: list[Skipped], out: Path,
         md += lines
         if png is not None:
             files["headline_profile"] = png
+    if budget_curves is not None:
+        data = curves.curves(by_task, budget_curves, skipped)
+        lines, png = curves.section(data, out, headline.HEADLINE_LABELS, csv_rows)
+        md += ["", *lines]
+        if png is not None:
+            files["budget_curves"] = png
+            md += [f"![Score against the interaction budget]({png.name})"]
     if paper_runs:
         lines, plots, png = _paper_track(paper_runs, skipped, out, labels_env, baseline, wall,
                                          csv_rows)  # fmt: skip

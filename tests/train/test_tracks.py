@@ -75,6 +75,10 @@ budget = 100
     ('name = "cp"', 'name = "a/b"', "name"),
     ("budget = 100", "budget = 100\ncolour = 1", "unknown key(s) 'colour'"),
     ("[[task]]", "[[task]\n", "not a TOML file"),
+    ("budget = 100", "budget = 100\nmethod_settings = { bco = { seed = 1 } }",
+     "method_settings.bco has unknown key(s) 'seed'"),
+    ("budget = 100", "budget = 100\nmethod_settings = { bco = { lr = -1.0 } }", "--lr"),
+    ("budget = 100", "budget = 100\nmethod_settings = { bco = 1 }", "is not a table"),
 ])  # fmt: skip
 def test_track_file_refusals(tmp_path, old, new, message):
     path = _write(tmp_path, GOOD.replace(old, new, 1))
@@ -112,6 +116,18 @@ idm_epochs = 3
         plan_track(track, ["other"], ["bco"], [0])
 
 
+def test_method_settings_apply_to_their_method_only(tmp_path):
+    track = load_track(_write(tmp_path, GOOD + """settings = { lr = 0.003 }
+[task.method_settings.bco]
+lr = 0.001
+"""))
+    random_cell, bco_cell = plan_track(track, [], ["random", "bco"], [100])
+    assert cell_config(bco_cell, tmp_path, track=track)["lr"] == 0.001
+    assert cell_config(random_cell, tmp_path, track=track)["lr"] == 0.003
+    with pytest.raises(ConfigError, match="fixes lr"):
+        cell_config(bco_cell, tmp_path, {"lr": 0.1}, track=track)
+
+
 def test_bench_runs_a_track(tmp_path):
     track = _write(tmp_path, GOOD.replace('methods = ["random", "bco"]',
                                           'methods = ["random", "expert"]'))  # fmt: skip
@@ -131,3 +147,30 @@ def test_bench_runs_a_track(tmp_path):
          "CartPole-v1", "--out", str(out)], capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     assert both.returncode == 2 and "give --envs" in both.stderr
+
+
+def test_budget_curves_are_the_headline_tasks_with_budgets_multiplied():
+    """Each budget variant ``TASK@xM`` is its headline task but for the budget (and GAIfO's
+    PPO steps): settings, per-method settings and every other option the same."""
+    from abco_train.report.budget_curves import variant_of
+
+    root = Path(__file__).resolve().parents[2]
+    headline = load_track("headline")
+    curves = load_track(root / "docs/results/headline/budget-curves.toml")
+    assert curves.test_seeds and set(curves.methods) == {"gaifo", "abco"}
+    bases = set()
+    for task in curves.tasks:
+        found = variant_of(task.name)
+        assert found is not None, task.name
+        base, multiple = headline.task(found[0]), found[1]
+        bases.add(base.name)
+        assert (task.env, task.headline, dict(task.settings)) == \
+            (base.env, base.headline, dict(base.settings)), task.name  # fmt: skip
+        assert dict(task.method_settings) == dict(base.method_settings), task.name
+        assert task.budget == base.budget * multiple, task.name
+        options = {m: dict(o) for m, o in task.method_options.items()}
+        assert options.pop("gaifo")["rl_steps"] == task.budget
+        assert options == {m: dict(o) for m, o in base.method_options.items() if m != "gaifo"}
+        gaifo = {k: v for k, v in base.method_options.get("gaifo", {}).items() if k != "rl_steps"}
+        assert {k: v for k, v in task.method_options["gaifo"].items() if k != "rl_steps"} == gaifo
+    assert len(bases) == 2
