@@ -51,11 +51,11 @@ def play_episodes(args: argparse.Namespace) -> list[int]:
 
 
 def check_playable(env_id: str, episodes: list[int], split: str) -> None:
-    """Refuse, before any rollout, maze layouts past the split and classic control without
-    pygame (it draws the frames).
+    """Refuse, before any rollout, maze layouts past the split, classic control without
+    pygame (it draws the frames) and an env that declares no ``rgb_array`` rendering.
 
     Raises:
-        ConfigError: A layout index out of range, or pygame missing.
+        ConfigError: A layout index out of range, pygame missing, or no frames to draw.
     """
     import importlib.util
 
@@ -66,9 +66,29 @@ def check_playable(env_id: str, episodes: list[int], split: str) -> None:
         if max(episodes) >= size:
             raise ConfigError(f"--episodes: the {split} split of {env_id} has layouts 0-"
                               f"{size - 1}, got {max(episodes)}")  # fmt: skip
-    elif importlib.util.find_spec("pygame") is None:
+        return
+    if env_id in abco_envs.CLASSIC_IDS and importlib.util.find_spec("pygame") is None:
         raise ConfigError(f"abco play draws {env_id} with pygame, which is not installed: "
                           'pip install "abco[human]"')  # fmt: skip
+    modes = _render_modes(env_id)
+    if "rgb_array" not in modes:
+        raise ConfigError(f"abco play needs frames from {env_id}, which does not render "
+                          f"'rgb_array' (its render modes: {', '.join(modes) or 'none'})")
+
+
+def _render_modes(env_id: str) -> list[str]:
+    """The render modes an env declares (``metadata["render_modes"]``; none: an empty list)."""
+    import gymnasium as gym
+
+    try:
+        env = gym.make(env_id)
+    except (gym.error.Error, ImportError, TypeError, ValueError) as exc:
+        raise ConfigError(f"abco play cannot make {env_id}: {exc}") from None
+    try:
+        modes = env.metadata.get("render_modes") or []
+        return [str(m) for m in modes] if isinstance(modes, (list, tuple)) else []
+    finally:
+        env.close()
 
 
 def play(args: argparse.Namespace) -> int:

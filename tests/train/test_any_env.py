@@ -129,6 +129,14 @@ def test_a_module_env_trains_end_to_end_on_user_datasets(home, tmp_path, capsys)
     assert "score" in capsys.readouterr().out
 
 
+def test_play_refuses_in_one_line_an_env_that_draws_no_frames(home, tmp_path, capsys):
+    assert abco_main(_argv(VECTOR_ENV, "corridor", tmp_path / "run")) == 0
+    capsys.readouterr()
+    assert abco_main(["play", str(tmp_path / "run"), "--quiet"]) == 2
+    one_error_line(capsys.readouterr().err, "does not render 'rgb_array'", "render modes: none")
+    assert not (tmp_path / "run" / "play_train.gif").exists()
+
+
 def test_the_encoder_follows_the_observations(home):
     vector = resolve_config(RunConfig(env=VECTOR_ENV, expert_data="x", pre_data="y"))
     image = resolve_config(RunConfig(env=IMAGE_ENV, expert_data="x", pre_data="y"))
