@@ -41,7 +41,14 @@ from abco_train.harness.run_folder import CONFIG, write_atomic
 from abco_train.methods.base import INTERACTION_KINDS
 from abco_train.report import aggregates as aggregate
 from abco_train.report import budget_curves as curves
-from abco_train.report import generalisation, headline, provenance, ranking, tables
+from abco_train.report import (
+    generalisation,
+    headline,
+    headline_goals,
+    provenance,
+    ranking,
+    tables,
+)
 from abco_train.report.plots import plot_label_distributions, plot_performance
 from abco_train.report.published import PAPER_TABLE2, published
 from abco_train.report.runs import (
@@ -186,7 +193,9 @@ def _compose(runs_dir: Path, runs: list[Run], skipped: list[Skipped], out: Path,
     if by_task:
         flags = provenance.flagged_counts(runs, current)
         lines, png = _benchmark(by_task, flags, skipped, out, csv_rows)
-        md += lines
+        track_runs = [r for task_runs in by_task.values() for r in task_runs]
+        md += [*lines, "", *headline_goals.goals_section(headline.task_cells(by_task),
+                                                         track_runs, csv_rows, wall)]  # fmt: skip
         if png is not None:
             files["headline_profile"] = png
     if budget_curves is not None:

@@ -321,3 +321,33 @@ def test_a_stopped_run_counts_as_the_random_policy(tmp_path: Path) -> None:
     cell = task_cells({"cartpole-short": load_runs(root)})["cartpole-short"]["abco"]
     assert cell.stopped == 1 and cell.values[2] == 0.0
     assert cell.mean == pytest.approx((0.8 + 0.81 + 0.0) / 3)
+
+
+def test_goals_are_checked_with_their_figures(reported: dict[str, Any]) -> None:
+    goals = _section(reported["md"], "## Goals of the benchmark track")
+    lines = [x for x in goals.splitlines() if x.startswith("- ")]
+    assert lines[0].startswith("- missed: Random within ±0.05 of 0")  # not run on one task
+    assert "(not run: acrobot-budget)" in lines[0]
+    assert lines[1].startswith("- met: Expert within ±0.05 of 1") and "1.010" in lines[1]
+    assert lines[2].startswith("- met: headroom") and "at least 3 of 3 tasks: 3" in lines[2]
+    assert lines[3].startswith("- met: learnable")
+    assert lines[4].startswith("- met: precision") and "no aggregate" not in lines[4]
+    assert lines[5].startswith("- met: no run over its task's budget")
+    assert lines[6].startswith("- not checked: wall time")
+
+
+def test_a_run_over_its_budget_misses_the_goal(tmp_path: Path) -> None:
+    from abco_train.report.headline import task_cells
+    from abco_train.report.headline_goals import goals_section
+    from abco_train.report.runs import load_runs
+
+    root = write_track(tmp_path / "grid", tasks=["cartpole-short"], methods=["abco", "random"])
+    over = root / "cartpole-short" / "abco" / "seed1" / "final.json"
+    over.write_text(json.dumps(task_record("cartpole-short", "abco", 1,
+                                           {"interactions": {"rl": 5001}})))  # fmt: skip
+    runs = load_runs(root)
+    lines = goals_section(task_cells({"cartpole-short": runs}), runs, [], 5 * 3600.0)
+    budget = next(x for x in lines if "budget" in x)
+    assert budget.startswith("- missed") and "cartpole-short/abco/seed1" in budget
+    assert next(x for x in lines if "wall time" in x).startswith("- missed")
+    assert next(x for x in lines if "precision" in x).startswith("- not checked")
