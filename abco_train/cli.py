@@ -262,7 +262,7 @@ def _report(args: argparse.Namespace) -> int:
     if args.tuning is not None:
         return _tuning(args)
     if args.track is not None:
-        raise ConfigError("--track names the track of a --tuning record")
+        raise ConfigError("--track applies only with --tuning (the track of a tuning record)")
     files = write_report(args.runs_dir, args.out, args.labels_env, args.baseline,
                          args.budget_curves)  # fmt: skip
     print(f"report: {files['report']}\ncsv: {files['csv']}")
@@ -274,7 +274,9 @@ def _tuning(args: argparse.Namespace) -> int:
     from abco_train.bench.tasks import load_track
     from abco_train.report.tuning import write_tuning
 
-    track = load_track(args.track or "headline")
+    if args.budget_curves is not None:
+        raise ConfigError("--budget-curves belongs to a report, not to a --tuning record")
+    track = load_track("headline" if args.track is None else args.track)
     if not track.validation_seeds:
         raise ConfigError(f"track {track.name} names no validation seeds")
     files = write_tuning(args.runs_dir, parse_list(args.tuning), track,

@@ -194,6 +194,11 @@ def _track(data: Any) -> Track:
     names = [t.name for t in built]
     if len(set(names)) != len(names):
         raise ValueError("two tasks have one name")
+    for task in built:  # a misspelt method would quietly run the defaults
+        strays = sorted((set(task.method_settings) | set(task.method_options)) - set(methods))
+        if methods and strays:
+            raise ValueError(f"task {task.name!r} sets options of {', '.join(strays)}, not a "
+                             f"method of the track ({', '.join(methods)})")  # fmt: skip
     return Track(
         name=check_name(head.get("name", "track"), "track name"), tasks=built,
         description=_text(head.get("description", ""), "[track] description", 20_000),
@@ -217,17 +222,17 @@ def _task(table: Any, index: int) -> Task:
     options = t.get("method_options", {})
     if not isinstance(options, dict) or not all(isinstance(v, dict) for v in options.values()):
         raise ValueError(f"task {name!r} method_options is not a table of tables")
-    own = t.get("method_settings", {})
-    if not isinstance(own, dict):
+    per_method = t.get("method_settings", {})
+    if not isinstance(per_method, dict):
         raise ValueError(f"task {name!r} method_settings is not a table of tables")
-    own = {check_name(m, "method name"): _known(v, set(settings_keys), f"task {name!r} "
-           f"method_settings.{m}") for m, v in own.items()}  # fmt: skip
+    per_method = {check_name(m, "method name"): _known(v, settings_keys, f"task {name!r} "
+                  f"method_settings.{m}") for m, v in per_method.items()}  # fmt: skip
     headline = t.get("headline")
     task = Task(name=name, env=_text(t.get("env"), f"task {name!r} env", 200), budget=budget,
                 headline=None if headline is None else _text(headline, "headline", 100),
                 measures=_text(t.get("measures", ""), "measures"),
                 basis=_text(t.get("basis", ""), "basis"), settings=dict(settings),
-                method_settings={m: dict(v) for m, v in own.items()},
+                method_settings={m: dict(v) for m, v in per_method.items()},
                 method_options={check_name(m, "method name"): dict(o)
                                 for m, o in options.items()})  # fmt: skip
     RunConfig(**task.config()).validate()  # the env, the settings' types and bounds, headline

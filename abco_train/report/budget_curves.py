@@ -49,37 +49,51 @@ def variant_of(task: str) -> tuple[str, float] | None:
 
 def curves(main: Mapping[str, Sequence[Run]], curves_dir: str | Path,
            skipped: list[Any] | None = None) -> Curves:  # fmt: skip
-    """The curves of the variants in ``curves_dir`` with their 1x points from ``main``
-    (the benchmark grid's runs by task), for the methods that have a variant.
+    """The curves of the variants in ``curves_dir`` with their 1x points from ``main`` (the
+    benchmark grid's runs by task, on the seeds the variants ran), for the methods that have a
+    variant.
 
     Raises:
-        ReportError: ``curves_dir`` holds no task named as a variant.
+        ReportError: ``curves_dir`` is not a folder or holds no task named as a variant, or
+            a variant's records carry another budget than its multiple of its task's.
     """
+    if not Path(curves_dir).is_dir():
+        raise ReportError(f"--budget-curves {escape(curves_dir, 200)} is not a folder")
     by_task, _ = split_tracks(load_runs(curves_dir, skipped))
     variants = {t: v for t in by_task if (v := variant_of(t)) is not None}
     if not variants:
         raise ReportError(f"--budget-curves {escape(curves_dir, 200)} holds no task named "
                           "TASK@xMULTIPLE (a budget variant of a benchmark task)")  # fmt: skip
-    cells = task_cells({t: by_task[t] for t in variants})
-    bases = {base for base, _ in variants.values()}
-    base_cells = task_cells({t: runs for t, runs in main.items() if t in bases})
+    seeds: dict[str, set[int]] = {}  # base task -> the seeds its variants ran
+    for task, (base, _) in variants.items():
+        seeds.setdefault(base, set()).update(r.seed for r in by_task[task])
+    ones = task_cells({b: [r for r in main.get(b, ()) if r.seed in seeds[b]] for b in seeds})
     out: Curves = {}
-    for task, by_method in cells.items():
-        base = variants[task][0]
+    for task, by_method in task_cells({t: by_task[t] for t in variants}).items():
+        base, multiple = variants[task]
         for method, cell in by_method.items():
             points = out.setdefault(base, {}).setdefault(method, [])
-            points.append((_budget(cell), cell))
+            one = ones.get(base, {}).get(method)
+            if one is not None and one.budgets and cell.budgets:
+                _check_budget(task, cell, multiple * min(one.budgets))
+            if cell.budgets:  # none: no finished record to place it
+                points.append((min(cell.budgets), cell))
     for base, by_method in out.items():
         for method, points in by_method.items():
-            one = base_cells.get(base, {}).get(method)
-            if one is not None:
-                points.append((_budget(one), one))
+            one = ones.get(base, {}).get(method)
+            if one is not None and one.budgets:
+                points.append((min(one.budgets), one))
             points.sort(key=lambda p: p[0])
     return out
 
 
-def _budget(cell: Cell) -> int:
-    return min(cell.budgets) if cell.budgets else 0
+def _check_budget(task: str, cell: Cell, expected: float) -> None:
+    """Refuse a variant whose records carry another budget than its multiple of its task's."""
+    if cell.budgets != {round(expected)}:
+        found = ", ".join(f"{b:,}" for b in sorted(cell.budgets))
+        raise ReportError(f"budget variant {escape(task, 120)}: {cell.method}'s records carry "
+                          f"budget {found}, not {round(expected):,} (its multiple of the "
+                          "task's budget)")  # fmt: skip
 
 
 def section(data: Curves, out: Path, labels: Mapping[str, str],
@@ -87,9 +101,10 @@ def section(data: Curves, out: Path, labels: Mapping[str, str],
     """The budget curves' Markdown lines (CSV rows appended) and their plot in ``out``."""
     lines = ["## Budget curves", "",
              "Each task's headline score at several interaction budgets: the 1x point is the "
-             "benchmark grid's run, the others run the task with its budget (and GAIfO's PPO "
-             "steps) multiplied, nothing else changed. Score: mean over seeds [95% bootstrap "
-             "interval]; spent: mean interactions per finished run.", ""]  # fmt: skip
+             "benchmark grid's runs on the seeds the variants ran, the others run the task "
+             "with its budget (and GAIfO's PPO steps) multiplied, nothing else changed. Score: "
+             "mean over seeds [95% bootstrap interval]; spent: mean interactions per finished "
+             "run.", ""]  # fmt: skip
     for base, by_method in data.items():
         budgets = sorted({b for points in by_method.values() for b, _ in points})
         lines += [f"### {escape(base)}", "",

@@ -16,6 +16,7 @@ Example:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -40,7 +41,7 @@ def reference_line(method: str, means: Mapping[str, float], target: float,
     """The line of one reference method: its mean score per task against ``target`` (a task
     of ``tasks`` it did not run on misses the goal)."""
     tol = HEADLINE_GOALS["reference_tolerance"]
-    outside = [t for t, m in means.items() if abs(m - target) > tol]
+    outside = [t for t, m in means.items() if abs(m - target) > tol + 1e-9]  # 1 - 0.95 > 0.05
     absent = [t for t in tasks if t not in means]
     figures = ", ".join(f"{escape(t, 80)} {fmt(m)}" for t, m in means.items())
     where = (f" (outside: {', '.join(outside)})" if outside else "") + (
@@ -59,7 +60,7 @@ def _headroom(cells: Mapping[str, Mapping[str, Cell]]) -> list[str]:
             best[task] = max(ifo, key=lambda p: p[1])
     cap, floor = HEADLINE_GOALS["headroom_max"], HEADLINE_GOALS["learnable_min"]
     below = [t for t, (_, s) in best.items() if s <= cap]
-    need = -(-round(HEADLINE_GOALS["headroom_share"] * len(cells) * 1000) // 1000)
+    need = math.ceil(HEADLINE_GOALS["headroom_share"] * len(cells) - 1e-9)  # 5/7 * 7: 5
     hopeless = [t for t in cells if t not in best or best[t][1] <= floor]
     figures = ", ".join(f"{escape(t, 80)} {HEADLINE_LABELS.get(m, m)} {fmt(s)}"
                         for t, (m, s) in best.items())  # fmt: skip
@@ -74,15 +75,18 @@ def _precision(csv_rows: Sequence[Mapping[str, Any]]) -> str:
     rows = {r["method"]: r for r in csv_rows
             if r.get("table") == "headline-aggregate" and r.get("metric") == "score"}  # fmt: skip
     if not rows:
-        return "- not checked: precision (no IQM: no IfO method with scored runs on every task)"
+        return ("- not checked: precision (no IQM computed: rliable missing, or no IfO method "
+                "with scored runs on every task; see Aggregates)")
     widths = {m: float(r["iqm_ci_high"]) - float(r["iqm_ci_low"]) for m, r in rows.items()}
     wide = [m for m, w in widths.items() if w >= width]
     missing = [m for m in IFO_METHODS if m not in rows]
     figures = ", ".join(f"{HEADLINE_LABELS.get(m, m)} {w:.3f}" for m, w in widths.items())
     return (f"- {_verdict(not wide and not missing)}: precision, every IfO method's IQM 95% "
             f"interval narrower than {width:.2f}: widths {figures}"
-            + (f"; too wide: {', '.join(wide)}" if wide else "")
-            + (f"; no aggregate: {', '.join(missing)}" if missing else ""))  # fmt: skip
+            + (f"; too wide: {', '.join(HEADLINE_LABELS.get(m, m) for m in wide)}" if wide
+               else "")
+            + (f"; no aggregate: {', '.join(HEADLINE_LABELS.get(m, m) for m in missing)}"
+               if missing else ""))  # fmt: skip
 
 
 def _budget(runs: Sequence[Run]) -> str:

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from abco_train.bench.records import check_name, escape
+from abco_train.bench.records import Skipped, check_name, escape
 from abco_train.bench.tasks import Track
 from abco_train.config.fields import ConfigError
 from abco_train.config.run import env_kind
@@ -68,6 +68,8 @@ class TuningRecord:
     configs: tuple[str, ...]
     families: dict[str, tuple[str, ...]]  # family -> its tasks
     results: dict[tuple[str, str], FamilyResult]  # (method, family) -> result
+    #: Records left out (damaged, or not their folder's): where, and why.
+    skipped: list[Skipped] = field(default_factory=list)
 
     def choices(self) -> dict[str, dict[str, str | None]]:
         """``method -> family -> configuration kept`` (``None``: not decided yet)."""
@@ -98,11 +100,14 @@ def tuning_record(tuning_dir: str | Path, configs: Sequence[str], track: Track,
         families.setdefault(env_kind(task.env), []).append(task.name)
     methods = [m for m in method_order(track.methods) if m not in REFERENCE_METHODS]
     results = {(m, f): FamilyResult(m, f) for m in methods for f in families}
+    skipped: list[Skipped] = []
     for config in configs:
         folder = Path(tuning_dir) / check_name(config, "configuration")
         if not folder.is_dir():
             raise ReportError(f"no configuration folder {escape(folder, 200)}")
-        by_task, _ = split_tracks(load_runs(folder))
+        found: list[Skipped] = []
+        by_task, _ = split_tracks(load_runs(folder, found))
+        skipped += [Skipped(f"{config}/{s.where}", s.reason) for s in found]
         cells = task_cells(by_task)
         for (method, family), result in results.items():
             scores = result.scores.setdefault(config, {})
@@ -114,7 +119,8 @@ def tuning_record(tuning_dir: str | Path, configs: Sequence[str], track: Track,
                         scores[(task, seed)] = cell.values[seed]
                     else:
                         missing.append((task, seed))
-    return TuningRecord(tuple(configs), {f: tuple(t) for f, t in families.items()}, results)
+    return TuningRecord(tuple(configs), {f: tuple(t) for f, t in families.items()}, results,
+                        skipped)  # fmt: skip
 
 
 def _summary(record: TuningRecord) -> list[str]:
@@ -158,8 +164,10 @@ def write_tuning(tuning_dir: str | Path, configs: Sequence[str], track: Track,
 
     if not configs:
         raise ConfigError("--tuning names no configuration (e.g. defaults,lr-div3)")
-    record = tuning_record(tuning_dir, configs, track, seeds)
     target = Path(out) if out is not None else Path(tuning_dir)
+    if target.exists() and not target.is_dir():
+        raise ReportError(f"--out {escape(target, 200)} is not a folder")
+    record = tuning_record(tuning_dir, configs, track, seeds)
     target.mkdir(parents=True, exist_ok=True)
     families = ", ".join(f"{f}: {', '.join(t)}" for f, t in record.families.items())
     lines = [f"# Tuning record: {escape(track.name, 80)}", "",
@@ -171,6 +179,10 @@ def write_tuning(tuning_dir: str | Path, configs: Sequence[str], track: Track,
              "higher mean.", "", *_summary(record), "", "## Runs", ""]  # fmt: skip
     for method in dict.fromkeys(m for m, _ in record.results):
         lines += _runs(record, method)
+    if record.skipped:
+        lines += ["## Records left out", "",
+                  *(f"- `{escape(s.where, 200)}`: {escape(s.reason, 300)}"
+                    for s in record.skipped)]  # fmt: skip
     files = {"record": target / "tuning.md", "choices": target / "choices.json"}
     write_atomic(files["record"], "\n".join(lines))
     choices = {"track": track.name, "configs": list(record.configs), "seeds": list(seeds),

@@ -41,6 +41,7 @@ def grids(tmp_path: Path) -> tuple[Path, Path]:
             for seed, value in enumerate(values):
                 _run(root, task, method, seed, 1000 * multiple, value)
     _run(main_dir, "other", "gaifo", 0, 1000, 0.3)  # a task without variants
+    _run(main_dir, "acro", "gaifo", 7, 1000, 0.9)  # a seed no variant ran: not on the curve
     return main_dir, curves_dir
 
 
@@ -57,7 +58,8 @@ def test_report_draws_the_curves(grids: tuple[Path, Path]) -> None:
     assert "## Budget curves" in text and "### acro" in text
     assert "| 1,000 | 4,000 | 16,000 |" in text
     row = next(line for line in text.splitlines() if line.startswith("| GAIfO"))
-    # 1x from the benchmark grid; the stopped run at 16x counts 0: (0.8 + 0) / 2
+    # 1x from the benchmark grid on the variants' seeds (0, 1; not 7); the stopped run at 16x
+    # counts 0: (0.8 + 0) / 2
     assert "0.150 [" in row and "0.450 [" in row and "0.400 [" in row and "1 stopped" in row
     assert (main_dir / "report" / "budget_curves.png").stat().st_size > 0
     # the variants stay out of the benchmark's task tables
@@ -70,3 +72,15 @@ def test_budget_curves_without_variants_is_one_line(grids: tuple[Path, Path],
     assert main(["report", str(main_dir), "--budget-curves", str(main_dir)]) == 2
     err = capsys.readouterr().err.strip()
     assert "holds no task named TASK@xMULTIPLE" in err and len(err.splitlines()) == 1
+
+
+def test_a_variant_with_the_wrong_budget_is_refused(grids: tuple[Path, Path],
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    main_dir, curves_dir = grids
+    _run(curves_dir, "acro@x2", "abco", 0, 1000, 0.6)  # records the 1x budget, not 2,000
+    assert main(["report", str(main_dir), "--budget-curves", str(curves_dir)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "acro@x2: abco's records carry budget 1,000, not 2,000" in err
+    assert len(err.splitlines()) == 1
+    assert main(["report", str(main_dir), "--budget-curves", str(main_dir / "none")]) == 2
+    assert "is not a folder" in capsys.readouterr().err

@@ -117,3 +117,20 @@ def test_cli_refuses_a_missing_configuration(tuning: Path,
     err = capsys.readouterr().err
     assert code == 2 and "no configuration folder" in err and len(err.strip().splitlines()) == 1
     assert not (tuning / "choices.json").exists()
+
+
+def test_a_damaged_record_is_named_in_the_record(tuning: Path) -> None:
+    (tuning / "lr-div3" / "maze" / "bco" / "seed100" / "final.json").write_text("{not json")
+    assert main(["report", str(tuning), "--tuning", "defaults,lr-div3",
+                 "--track", str(tuning / "mini.toml")]) == 0  # fmt: skip
+    text = (tuning / "tuning.md").read_text()
+    assert "## Records left out" in text and "lr-div3/maze/bco/seed100" in text
+    choices = json.loads((tuning / "choices.json").read_text())
+    assert choices["choices"]["bco"]["maze"] is None  # that run is missing: no choice
+
+
+def test_out_must_be_a_folder(tuning: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tuning / "file").write_text("x")
+    assert main(["report", str(tuning), "--tuning", "defaults", "--track",
+                 str(tuning / "mini.toml"), "--out", str(tuning / "file")]) == 2  # fmt: skip
+    assert "is not a folder" in capsys.readouterr().err

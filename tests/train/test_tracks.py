@@ -79,6 +79,10 @@ budget = 100
      "method_settings.bco has unknown key(s) 'seed'"),
     ("budget = 100", "budget = 100\nmethod_settings = { bco = { lr = -1.0 } }", "--lr"),
     ("budget = 100", "budget = 100\nmethod_settings = { bco = 1 }", "is not a table"),
+    ("budget = 100", "budget = 100\nmethod_settings = { bcoo = { lr = 0.1 } }",
+     "sets options of bcoo, not a method of the track"),
+    ("budget = 100", "budget = 100\nmethod_options = { abco = { idm_epochs = 1 } }",
+     "sets options of abco, not a method of the track"),
 ])  # fmt: skip
 def test_track_file_refusals(tmp_path, old, new, message):
     path = _write(tmp_path, GOOD.replace(old, new, 1))
