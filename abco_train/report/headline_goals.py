@@ -32,6 +32,10 @@ HEADLINE_GOALS = {"reference_tolerance": 0.05, "headroom_max": 0.90, "headroom_s
                   "learnable_min": 0.10, "iqm_ci_width": 0.10, "wall_s": 4 * 3600.0}  # fmt: skip
 
 
+def _label(method: str) -> str:
+    return str(HEADLINE_LABELS.get(method) or method)
+
+
 def _verdict(met: bool) -> str:
     return "met" if met else "missed"
 
@@ -80,13 +84,11 @@ def _precision(csv_rows: Sequence[Mapping[str, Any]]) -> str:
     widths = {m: float(r["iqm_ci_high"]) - float(r["iqm_ci_low"]) for m, r in rows.items()}
     wide = [m for m, w in widths.items() if w >= width]
     missing = [m for m in IFO_METHODS if m not in rows]
-    figures = ", ".join(f"{HEADLINE_LABELS.get(m, m)} {w:.3f}" for m, w in widths.items())
+    figures = ", ".join(f"{_label(m)} {w:.3f}" for m, w in widths.items())
     return (f"- {_verdict(not wide and not missing)}: precision, every IfO method's IQM 95% "
             f"interval narrower than {width:.2f}: widths {figures}"
-            + (f"; too wide: {', '.join(HEADLINE_LABELS.get(m, m) for m in wide)}" if wide
-               else "")
-            + (f"; no aggregate: {', '.join(HEADLINE_LABELS.get(m, m) for m in missing)}"
-               if missing else ""))  # fmt: skip
+            + (f"; too wide: {', '.join(_label(m) for m in wide)}" if wide else "")
+            + (f"; no aggregate: {', '.join(_label(m) for m in missing)}" if missing else ""))
 
 
 def _budget(runs: Sequence[Run]) -> str:
