@@ -72,6 +72,16 @@ def test_gaifo_runs_on_every_env_and_counts_its_rl_steps(env_id, tiny_data, tmp_
     assert rows[0]["train"]["options"]["rl_steps"] == 96
 
 
+@pytest.mark.parametrize("preset", ["general", "cpu"])
+def test_gaifo_on_a_maze_reads_frames_with_the_presets_networks(preset, tiny_data, tmp_path):
+    """The general preset's cell networks (``cellplan``) need the maze's grid: the
+    discriminator gets it, and the cpu preset's compact CNN is what it was."""
+    final = train(gaifo_config("AbcoMaze5x5-v0", tiny_data, tmp_path, preset=preset))
+    assert final["status"] == "ok" and np.isfinite(final["train/paper"]["performance"])
+    cfg = resolve_config(gaifo_config("AbcoMaze5x5-v0", tiny_data, tmp_path, preset=preset))
+    assert cfg.arch == {"general": "cellplan", "cpu": "cnn"}[preset]
+
+
 @pytest.mark.parametrize("env_id", ["CartPole-v1", "AbcoMaze3x3-v0"])
 def test_discriminator_labels_expert_pairs_1_and_learner_pairs_0(env_id, tiny_data, tmp_path):
     assert (EXPERT_LABEL, LEARNER_LABEL) == (1.0, 0.0)

@@ -99,6 +99,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+import abco_envs
 from abco_data.torch_view import frames_tensor
 from abco_train.config.run import ConfigError, RunConfig, env_kind
 from abco_train.harness.runtime import derived_seed
@@ -141,12 +142,13 @@ def _require_sb3() -> None:
 
 
 def build_discriminator(data: TrainingData, arch: str | None, attention: bool = False,
-                        hidden: int = 64) -> IDMNet:  # fmt: skip
+                        hidden: int = 64, env_id: str | None = None) -> IDMNet:  # fmt: skip
     """``D``'s network: one logit for a batch of pairs ``(s, s')`` (``net(s, s1) -> (B, 1)``).
 
     abco's IDM in its ``difference`` form with one output: vectors standardised by the mean
     and std of the expert's ``s`` and ``s' - s``; frames (uint8) through ``arch`` on the
-    frame and the frame difference (``arch`` ``None``: ``mlp`` or ``cnn`` from the space).
+    frame and the frame difference (``arch`` ``None``: ``mlp`` or ``cnn`` from the space); a
+    maze's (``env_id``) cell networks (``cellnet``, ``cellplan``) also get its grid size.
     """
     stats: dict[str, Any] = {}
     if len(data.observation_space.shape) == 1:
@@ -154,6 +156,8 @@ def build_discriminator(data: TrainingData, arch: str | None, attention: bool = 
         d = data.expert_obs[data.expert_t + 1].astype(np.float64) - s
         stats = {"obs_mean": s.mean(0), "obs_std": s.std(0), "delta_mean": d.mean(0),
                  "delta_std": d.std(0)}  # fmt: skip
+    elif env_id is not None and abco_envs.is_maze(abco_envs.env_name(env_id)):  # cell nets read it
+        stats = {"grid": abco_envs.maze_size(env_id)}
     _, net = build_networks(data.observation_space, 1, arch, attention, "difference",
                             hidden=hidden, **stats)  # fmt: skip
     return net
@@ -211,7 +215,7 @@ class GAIfO(Method):
         self.device = torch.device(config.device)
         # -- the discriminator, from torch's generator (seeded by the harness) ---------------
         self.discriminator = build_discriminator(
-            data, config.arch, bool(config.attention), opt.d_hidden).to(self.device)
+            data, config.arch, bool(config.attention), opt.d_hidden, config.env).to(self.device)
         self.d_opt = torch.optim.Adam(self.discriminator.parameters(), lr=opt.d_lr)
         self.expert_obs = frames_tensor(data.expert_obs)
         self.expert_t = torch.from_numpy(data.expert_t)
