@@ -41,6 +41,7 @@ from abco_train.cli_play import add_play_options, play
 from abco_train.config.fields import check_fields, count
 from abco_train.config.limits import MAX_JOBS
 from abco_train.config.run import ConfigError, add_config_options, config_from_args
+from abco_train.report.command import add_report_options, report
 
 __all__ = ["build_parser", "main"]
 
@@ -253,56 +254,6 @@ def _builtin_names() -> set[str]:
     return set(builtin_options())
 
 
-# -- abco report -----------------------------------------------------------------------------
-
-
-def _report(args: argparse.Namespace) -> int:
-    from abco_train.report.write import write_report
-
-    if args.tuning is not None:
-        return _tuning(args)
-    if args.track is not None:
-        raise ConfigError("--track applies only with --tuning (the track of a tuning record)")
-    files = write_report(args.runs_dir, args.out, args.labels_env, args.baseline,
-                         args.budget_curves)  # fmt: skip
-    print(f"report: {files['report']}\ncsv: {files['csv']}")
-    return 0
-
-
-def _tuning(args: argparse.Namespace) -> int:
-    from abco_train.bench.cells import parse_list, parse_seeds
-    from abco_train.bench.tasks import load_track
-    from abco_train.report.tuning import write_tuning
-
-    if args.budget_curves is not None:
-        raise ConfigError("--budget-curves belongs to a report, not to a --tuning record")
-    track = load_track("headline" if args.track is None else args.track)
-    if not track.validation_seeds:
-        raise ConfigError(f"track {track.name} names no validation seeds")
-    files = write_tuning(args.runs_dir, parse_list(args.tuning), track,
-                         parse_seeds(track.validation_seeds), args.out)  # fmt: skip
-    print(f"tuning record: {files['record']}\nchoices: {files['choices']}")
-    return 0
-
-
-def _report_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("runs_dir", help="an `abco bench --out` folder")
-    parser.add_argument("--out", default=None, help="output folder (default RUNS_DIR/report)")
-    parser.add_argument("--labels-env", default="AbcoMaze5x5-v0",
-                        help="env of the IDM label-distribution plot (default the 5x5 maze)")
-    parser.add_argument("--baseline", default=None, metavar="METHOD",
-                        help="reference method of the probability of improvement (default"
-                        " abco); must be a method of the grid")  # fmt: skip
-    parser.add_argument("--budget-curves", default=None, metavar="CURVES_DIR",
-                        help="a grid of budget variants of the track's tasks (TASK@xMULTIPLE):"
-                        " their score-against-budget curves, the 1x points from RUNS_DIR")
-    parser.add_argument("--tuning", default=None, metavar="CONFIG[,CONFIG...]",
-                        help="write the tuning record of RUNS_DIR instead: one validation grid"
-                        " per configuration in RUNS_DIR/CONFIG, the defaults first")
-    parser.add_argument("--track", default=None, metavar="NAME|FILE.toml",
-                        help="the track of --tuning (default headline)")
-
-
 # -- abco convert-checkpoint -----------------------------------------------------------------
 
 #: The help of ``abco convert-checkpoint``: unpickling can run code.
@@ -352,8 +303,8 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     _subcommand(sub, "bench", "run an (env, method, seed) grid of training runs under "
                 "OUT/{env}/{method}/seed{seed}; finished cells are skipped", _bench_options,
                 _bench)  # fmt: skip
-    _subcommand(sub, "report", "tables and plots of an abco bench grid", _report_options,
-                _report, plugins=False)  # fmt: skip
+    _subcommand(sub, "report", "tables and plots of an abco bench grid", add_report_options,
+                report, plugins=False)  # fmt: skip
     _subcommand(sub, "play", "roll a trained policy out and write an animated GIF",
                 add_play_options, play)  # fmt: skip
     _subcommand(sub, "convert-checkpoint", CONVERT_HELP, _convert_options, _convert_checkpoint,
