@@ -317,7 +317,10 @@ def check_final(final: Any, cell: tuple[str, str, int, int | None] | None = None
     final = _object(final)
     found = _cell_fields(final)
     task = None if final.get("task") is None else check_name(final["task"], "task")
-    if cell is not None and tuple(cell) not in (found, (task, *found[1:])):
+    # a task's record sits in OUT/{task}/{method}/seed{n}: its layouts (a task setting such
+    # as 100 training layouts) are no level of that folder
+    mine = (found, (task, *found[1:]), (task, *found[1:3], None))
+    if cell is not None and tuple(cell) not in mine:
         raise RecordError(f"the record of {_cell_text(found)}, not of {_cell_text(cell)}")
     status = _status(final, "ok")  # records older than the status key: finished
     _all_finite(final, "final")

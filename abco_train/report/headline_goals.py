@@ -66,7 +66,7 @@ def _headroom(cells: Mapping[str, Mapping[str, Cell]]) -> list[str]:
     below = [t for t, (_, s) in best.items() if s <= cap]
     need = math.ceil(HEADLINE_GOALS["headroom_share"] * len(cells) - 1e-9)  # 5/7 * 7: 5
     hopeless = [t for t in cells if t not in best or best[t][1] <= floor]
-    figures = ", ".join(f"{escape(t, 80)} {HEADLINE_LABELS.get(m, m)} {fmt(s)}"
+    figures = "; ".join(f"{escape(t, 80)} {_label(m)} {fmt(s)}"
                         for t, (m, s) in best.items())  # fmt: skip
     return [f"- {_verdict(len(below) >= need)}: headroom, the best IfO method at most {cap:.2f} "
             f"on at least {need} of {len(cells)} tasks: {len(below)} ({figures})",
@@ -84,11 +84,11 @@ def _precision(csv_rows: Sequence[Mapping[str, Any]]) -> str:
     widths = {m: float(r["iqm_ci_high"]) - float(r["iqm_ci_low"]) for m, r in rows.items()}
     wide = [m for m, w in widths.items() if w >= width]
     missing = [m for m in IFO_METHODS if m not in rows]
-    figures = ", ".join(f"{_label(m)} {w:.3f}" for m, w in widths.items())
+    figures = "; ".join(f"{_label(m)} {w:.3f}" for m, w in widths.items())
     return (f"- {_verdict(not wide and not missing)}: precision, every IfO method's IQM 95% "
             f"interval narrower than {width:.2f}: widths {figures}"
-            + (f"; too wide: {', '.join(_label(m) for m in wide)}" if wide else "")
-            + (f"; no aggregate: {', '.join(_label(m) for m in missing)}" if missing else ""))
+            + (f". Too wide: {'; '.join(_label(m) for m in wide)}" if wide else "")
+            + (f". No aggregate: {'; '.join(_label(m) for m in missing)}" if missing else ""))
 
 
 def _budget(runs: Sequence[Run]) -> str:

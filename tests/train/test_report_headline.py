@@ -303,6 +303,12 @@ def test_a_task_record_belongs_to_its_task_folder() -> None:
     assert check_final(record, ("CartPole-v1", "abco", 1, None)) is record
     with pytest.raises(RecordError, match="the record of CartPole-v1/abco/seed1, not of"):
         check_final(record, ("maze5-heldout", "abco", 1, None))
+    # a task that trains on K layouts: its records sit in the task's folder, no layouts level
+    trained = task_record("maze5-heldout", "abco", 1, {"layouts": 100})
+    assert check_final(trained, ("maze5-heldout", "abco", 1, None)) is trained
+    assert check_final(trained, ("AbcoMaze5x5-v0", "abco", 1, 100)) is trained
+    with pytest.raises(RecordError, match="not of"):
+        check_final(trained, ("AbcoMaze5x5-v0", "abco", 1, None))
     assert provenance.version_state(record, THIS) == "this"
 
 
@@ -334,7 +340,7 @@ def test_goals_are_checked_with_their_figures(reported: dict[str, Any]) -> None:
     if aggregates.load_rliable()[0] is None:
         assert lines[4].startswith("- not checked: precision")
     else:
-        assert lines[4].startswith("- met: precision") and "no aggregate" not in lines[4]
+        assert lines[4].startswith("- met: precision") and "No aggregate" not in lines[4]
     assert lines[5].startswith("- met: no run over its task's budget")
     assert lines[6].startswith("- not checked: wall time")
 
