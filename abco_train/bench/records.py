@@ -310,17 +310,14 @@ def _reference(ref: dict[str, Any]) -> None:
 
 def check_final(final: Any, cell: tuple[str, str, int, int | None] | None = None
                 ) -> dict[str, Any]:  # fmt: skip
-    """A ``final.json``: the cell it belongs to (``cell``, when given, must be it: its first
-    part the record's env, or its task), its status, every number finite, and for a finished
-    run (``status`` ``ok``) at least one evaluation with ``performance`` and ``aer``; the
-    benchmark's keys where present (:func:`_check_benchmark_keys`)."""
+    """A ``final.json``: its cell (``cell`` must be it: first the record's env or task), its
+    status, every number finite, a finished run (``ok``) with an evaluation holding
+    ``performance`` and ``aer``; the benchmark's keys (:func:`_check_benchmark_keys`)."""
     final = _object(final)
     found = _cell_fields(final)
     task = None if final.get("task") is None else check_name(final["task"], "task")
-    # a task's record sits in OUT/{task}/{method}/seed{n}: its layouts (a task setting such
-    # as 100 training layouts) are no level of that folder
-    mine = (found, (task, *found[1:]), (task, *found[1:3], None))
-    if cell is not None and tuple(cell) not in mine:
+    if cell is not None and tuple(cell) not in (found, (task, *found[1:]),
+                                                (task, *found[1:3], None)):  # task's K: no folder
         raise RecordError(f"the record of {_cell_text(found)}, not of {_cell_text(cell)}")
     status = _status(final, "ok")  # records older than the status key: finished
     _all_finite(final, "final")
