@@ -8,6 +8,8 @@ configuration's headline scores, run by run, and their mean over the family's ta
 the configuration with the higher mean is kept, and a tie keeps the first (the defaults). A run
 its method stopped without a result (e.g. its IDM at chance) counts as score 0, as in the
 report. A configuration with a missing run makes no choice: the record says what is missing.
+A configuration written ``defaults+rerun`` overlays a second folder on the first: the cells
+(task and method) the second holds replace the first's.
 
 ``abco report TUNING --tuning defaults,lr-div3`` writes ``tuning.md`` and ``choices.json``.
 
@@ -29,7 +31,7 @@ from abco_train.bench.records import Skipped, check_name, escape
 from abco_train.bench.tasks import Track
 from abco_train.config.fields import ConfigError
 from abco_train.config.run import env_kind
-from abco_train.report.headline import REFERENCE_METHODS, split_tracks, task_cells
+from abco_train.report.headline import REFERENCE_METHODS, Cell, split_tracks, task_cells
 from abco_train.report.runs import ReportError, load_runs, method_order
 from abco_train.report.tables import fmt
 
@@ -102,13 +104,7 @@ def tuning_record(tuning_dir: str | Path, configs: Sequence[str], track: Track,
     results = {(m, f): FamilyResult(m, f) for m in methods for f in families}
     skipped: list[Skipped] = []
     for config in configs:
-        folder = Path(tuning_dir) / check_name(config, "configuration")
-        if not folder.is_dir():
-            raise ReportError(f"no configuration folder {escape(folder, 200)}")
-        found: list[Skipped] = []
-        by_task, _ = split_tracks(load_runs(folder, found))
-        skipped += [Skipped(f"{config}/{s.where}", s.reason) for s in found]
-        cells = task_cells(by_task)
+        cells = _config_cells(Path(tuning_dir), config, skipped)
         for (method, family), result in results.items():
             scores = result.scores.setdefault(config, {})
             missing = result.missing.setdefault(config, [])
@@ -121,6 +117,24 @@ def tuning_record(tuning_dir: str | Path, configs: Sequence[str], track: Track,
                         missing.append((task, seed))
     return TuningRecord(tuple(configs), {f: tuple(t) for f, t in families.items()}, results,
                         skipped)  # fmt: skip
+
+
+def _config_cells(tuning_dir: Path, config: str, skipped: list[Skipped]
+                  ) -> dict[str, dict[str, Cell]]:  # fmt: skip
+    """``task -> method -> Cell`` of a configuration: one folder, or ``BASE+OVER[+...]`` where
+    a later folder's cells replace the earlier's of the same task and method (a default that
+    changed after the base grid ran: its re-validation's runs stand in for the base's)."""
+    cells: dict[str, dict[str, Cell]] = {}
+    for part in config.split("+"):
+        folder = tuning_dir / check_name(part, "configuration")
+        if not folder.is_dir():
+            raise ReportError(f"no configuration folder {escape(folder, 200)}")
+        found: list[Skipped] = []
+        by_task, _ = split_tracks(load_runs(folder, found))
+        skipped += [Skipped(f"{part}/{s.where}", s.reason) for s in found]
+        for task, by_method in task_cells(by_task).items():
+            cells.setdefault(task, {}).update(by_method)
+    return cells
 
 
 def _summary(record: TuningRecord) -> list[str]:

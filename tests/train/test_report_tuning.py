@@ -11,6 +11,7 @@ import pytest
 
 from abco_train.bench.tasks import load_track
 from abco_train.cli import main
+from abco_train.report.runs import ReportError
 from abco_train.report.tuning import choose, tuning_record
 
 TRACK = """
@@ -48,22 +49,27 @@ SCORES = {
 }  # fmt: skip
 
 
+def _record(root: Path, config: str, task: str, method: str, seed: int,
+            value: float | None) -> None:  # fmt: skip
+    run = root / config / task / method / f"seed{seed}"
+    run.mkdir(parents=True)
+    head = HEAD[task]
+    final = {"env": ENV[task], "method": method, "seed": seed, "task": task,
+             "budget": 1000, "headline": head,
+             "status": "ok" if value is not None else "idm_at_chance"}  # fmt: skip
+    if value is not None:
+        final[head] = {"performance": value, "aer": value, "score": value,
+                       "episode_scores": [value], "episodes": 1}  # fmt: skip
+    (run / "final.json").write_text(json.dumps(final))
+    (run / "config.json").write_text(json.dumps({"task": task}))
+
+
 def _write(root: Path) -> Path:
     for config, methods in SCORES.items():
         for method, tasks in methods.items():
             for task, values in tasks.items():
                 for seed, value in zip((100, 101), values):
-                    run = root / config / task / method / f"seed{seed}"
-                    run.mkdir(parents=True)
-                    head = HEAD[task]
-                    final = {"env": ENV[task], "method": method, "seed": seed, "task": task,
-                             "budget": 1000, "headline": head,
-                             "status": "ok" if value is not None else "idm_at_chance"}
-                    if value is not None:
-                        final[head] = {"performance": value, "aer": value, "score": value,
-                                       "episode_scores": [value], "episodes": 1}
-                    (run / "final.json").write_text(json.dumps(final))
-                    (run / "config.json").write_text(json.dumps({"task": task}))
+                    _record(root, config, task, method, seed, value)
     (root / "mini.toml").write_text(TRACK)
     return root
 
@@ -108,6 +114,20 @@ def test_cli_writes_the_record(tuning: Path, capsys: pytest.CaptureFixture[str])
     assert "| bco | classic | 0.650 (4 runs) | 0.775 (4 runs) | lr-div3 |" in text
     assert "not decided: runs missing" in text
     assert "| maze | 101 | 0.900 | missing |" in text
+
+
+def test_an_overlay_replaces_the_base_cells_it_holds(tuning: Path) -> None:
+    # a re-run of abco's maze cells (a default that changed): its runs stand in for the base's
+    for seed, value in zip((100, 101), (0.1, 0.3)):
+        _record(tuning, "rerun", "maze", "abco", seed, value)
+    track = load_track(tuning / "mini.toml")
+    record = tuning_record(tuning, ["defaults+rerun", "lr-div3"], track, [100, 101])
+    assert record.configs == ("defaults+rerun", "lr-div3")
+    assert record.results[("abco", "maze")].mean("defaults+rerun") == pytest.approx(0.2)
+    assert record.results[("bco", "maze")].mean("defaults+rerun") == pytest.approx(0.5)
+    assert record.results[("abco", "classic")].mean("defaults+rerun") == pytest.approx(0.8)
+    with pytest.raises(ReportError, match="no configuration folder"):
+        tuning_record(tuning, ["defaults+nope"], track, [100, 101])
 
 
 def test_cli_refuses_a_missing_configuration(tuning: Path,
