@@ -20,12 +20,8 @@ from abco_data.files import check_target
 from abco_data.format import (
     FORMAT_NAME,
     FORMAT_VERSION,
-    OBSERVATIONS,
     POSITIONS,
     REFERENCE_COLUMNS,
-    REWARDS,
-    TERMINATIONS,
-    TRUNCATIONS,
     DatasetWriter,
     action_column,
     episode_column,
@@ -192,11 +188,8 @@ def generate(dataset_id: str, path: str | os.PathLike[str] | None = None, *,
     with DatasetWriter(path) as w, progress_bar(total=total, unit=unit, disable=not progress,
                                                desc=s.id, leave=False) as bar:
         for ep_seed, k, cols in _episodes(s, env):
-            w.append(OBSERVATIONS, cols["observations"])
-            w.append(actions_name, np.asarray(cols["actions"], dtype=np.int64))
-            w.append(REWARDS, np.asarray(cols["rewards"], dtype=np.float64))
-            w.append(TERMINATIONS, np.asarray(cols["terminations"], dtype=bool))
-            w.append(TRUNCATIONS, np.asarray(cols["truncations"], dtype=bool))
+            w.append_steps(actions_name, cols["observations"], cols["actions"], cols["rewards"],
+                           cols["terminations"], cols["truncations"])  # fmt: skip
             if s.is_maze:
                 w.append(POSITIONS, np.asarray(cols["positions"], dtype=np.int64))
                 layouts.append(np.asarray(maze_cells(env), dtype=np.uint8))
@@ -206,18 +199,11 @@ def generate(dataset_id: str, path: str | os.PathLike[str] | None = None, *,
             returns.append(float(np.sum(cols["rewards"])))
             bar.update(1 if unit == "episodes" else lengths[-1])
         env.close()
-        lengths_arr = np.asarray(lengths, dtype=np.int64)
-        starts = np.concatenate([[0], np.cumsum(lengths_arr)[:-1]]).astype(np.int64)
-        w.append(episode_column("obs_offset"), starts + np.arange(len(lengths_arr)))
-        w.append(episode_column("transition_offset"), starts)
-        w.append(episode_column("length"), lengths_arr)
-        w.append(episode_column("seed"), np.asarray(seeds, dtype=np.int64))
-        w.append(episode_column("return"), np.asarray(returns, dtype=np.float64))
+        n_tr = w.append_episode_index(lengths, seeds, returns)
         if s.is_maze:
             w.append(episode_column("layout_index"), np.asarray(layout_index, dtype=np.int64))
             w.append(episode_column("layout"), np.stack(layouts))
         _write_reference(w, ref)
-        n_tr = int(lengths_arr.sum())
         w.attrs.update({
             "format": FORMAT_NAME, "format_version": FORMAT_VERSION, "dataset_id": s.id,
             "kind": s.kind, "env_id": s.env_id, "env_spec": gym.spec(s.env_id).to_json(),
@@ -225,8 +211,8 @@ def generate(dataset_id: str, path: str | os.PathLike[str] | None = None, *,
             "observation_space": space_to_json(env.observation_space),
             "action_space": space_to_json(env.action_space),
             "generator": GENERATOR, "generator_version": GENERATOR_VERSION,
-            "seed": s.params["seed"], "num_episodes": len(lengths_arr),
-            "num_transitions": n_tr, "num_observations": n_tr + len(lengths_arr),
+            "seed": s.params["seed"], "num_episodes": len(lengths),
+            "num_transitions": n_tr, "num_observations": n_tr + len(lengths),
             "creation_params": to_json(dict(s.params)),
             "overrides": to_json(sorted(overrides)),
         })

@@ -26,10 +26,7 @@ Example:
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
 import json
-import sys
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
@@ -39,6 +36,7 @@ import numpy as np
 from gymnasium import spaces
 
 from abco_data.errors import DatasetError, InvalidParameterError
+from abco_data.user_code import import_user_module, names_a_file
 
 __all__ = ["Policy", "load_policy", "checked_policy", "policy_name", "SB3_MAX_DATA_BYTES"]
 
@@ -76,29 +74,13 @@ def checked_policy(policy: Policy, action_space: spaces.Discrete, what: str) -> 
 
 
 def _import_module(module: str, spec: str) -> Any:
-    if module.endswith(".py") or Path(module).is_file():
-        path = Path(module).resolve()
-        if not path.is_file():
-            raise InvalidParameterError(f"policy {spec}: no file {module}")
-        name = f"abco_policy_{path.stem}"
-        if name in sys.modules:
-            return sys.modules[name]
-        found = importlib.util.spec_from_file_location(name, path)
-        if found is None or found.loader is None:
-            raise InvalidParameterError(f"policy {spec}: cannot import {module}")
-        loaded = importlib.util.module_from_spec(found)
-        sys.modules[name] = loaded
-        try:
-            found.loader.exec_module(loaded)
-        except Exception as exc:
-            del sys.modules[name]
-            raise InvalidParameterError(f"policy {spec}: {module} failed to import:"
-                                        f" {type(exc).__name__}: {exc}") from exc
-        return loaded
+    what = module if names_a_file(module) else f"module {module!r}"
     try:
-        return importlib.import_module(module)
+        return import_user_module(module, "abco_policy")
+    except FileNotFoundError:
+        raise InvalidParameterError(f"policy {spec}: no file {module}") from None
     except Exception as exc:
-        raise InvalidParameterError(f"policy {spec}: module {module!r} failed to import:"
+        raise InvalidParameterError(f"policy {spec}: {what} failed to import:"
                                     f" {type(exc).__name__}: {exc}") from exc
 
 

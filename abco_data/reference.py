@@ -215,23 +215,15 @@ def layout_reference(cells: np.ndarray, split: str = "layouts", *,
     Raises:
         ValueError: No layouts, or not a stack of square layouts.
     """
-    from abco_envs.maze.layout import layout_hash, shortest_path_length
+    from abco_envs.maze.layout import shortest_path_length
     from abco_envs.maze.rules import optimal_return
 
-    cells = np.asarray(cells)
-    if cells.ndim != 3 or cells.shape[1] != cells.shape[2] or not len(cells):
-        raise ValueError(f"expected a (k, n, n) stack of k >= 1 layouts, got {cells.shape}")
+    cells = _layout_stack(cells)
     size = cells.shape[1]
     lengths = np.array([shortest_path_length(c) for c in cells], dtype=np.float64)
     expert = np.asarray(optimal_return(size, lengths), dtype=np.float64)
     random = _random_walk_returns(cells, episodes, (_LAYOUT_STREAM, int(stream)))
-    for arr in (expert, random):
-        arr.flags.writeable = False
-    return ReferenceReturns(
-        expert_mean=float(expert.mean()), random_mean=float(random.mean()),
-        layout_ids=tuple(layout_hash(c) for c in cells), layout_splits=(split,) * len(cells),
-        expert_per_layout=expert, random_per_layout=random,
-    )
+    return _per_layout(cells, split, expert, random)
 
 
 @lru_cache(maxsize=16)
@@ -272,20 +264,33 @@ def protocol_reference(cells: np.ndarray, protocol: str, max_steps: int | None =
     Raises:
         ValueError: An unknown protocol, no layouts, or not a stack of square layouts.
     """
-    from abco_envs.maze.layout import layout_hash, shortest_path_length
+    from abco_envs.maze.layout import shortest_path_length
     from abco_envs.maze.rules import episode_return
 
     if protocol not in PROTOCOLS:
         raise ValueError(f"unknown protocol {protocol!r}; expected one of {PROTOCOLS}")
-    cells = np.asarray(cells)
-    if cells.ndim != 3 or cells.shape[1] != cells.shape[2] or not len(cells):
-        raise ValueError(f"expected a (k, n, n) stack of k >= 1 layouts, got {cells.shape}")
+    cells = _layout_stack(cells)
     size = cells.shape[1]
     cap = MAZE_MAX_STEPS if max_steps is None else min(MAZE_MAX_STEPS, int(max_steps))
     lengths = np.array([shortest_path_length(c) for c in cells], dtype=np.int64)
     expert = episode_return(size, np.minimum(lengths, cap), lengths <= cap).astype(np.float64)
     random = _random_walk_returns(cells, episodes, (_PROTOCOL_STREAM, PROTOCOLS.index(protocol)),
                                   protocol, cap)  # fmt: skip
+    return _per_layout(cells, split, expert, random)
+
+
+def _layout_stack(cells: np.ndarray) -> np.ndarray:
+    cells = np.asarray(cells)
+    if cells.ndim != 3 or cells.shape[1] != cells.shape[2] or not len(cells):
+        raise ValueError(f"expected a (k, n, n) stack of k >= 1 layouts, got {cells.shape}")
+    return cells
+
+
+def _per_layout(cells: np.ndarray, split: str, expert: np.ndarray,
+                random: np.ndarray) -> ReferenceReturns:  # fmt: skip
+    """References whose means are over ``cells``, the per-layout arrays frozen."""
+    from abco_envs.maze.layout import layout_hash
+
     for arr in (expert, random):
         arr.flags.writeable = False
     return ReferenceReturns(

@@ -32,13 +32,8 @@ from abco_data.errors import DatasetError, InvalidParameterError
 from abco_data.format import (
     FORMAT_NAME,
     FORMAT_VERSION,
-    OBSERVATIONS,
-    REWARDS,
-    TERMINATIONS,
-    TRUNCATIONS,
     DatasetWriter,
     action_column,
-    episode_column,
     space_to_json,
     to_json,
 )
@@ -211,33 +206,23 @@ def write_episodes(path: str | os.PathLike[str], episodes: Iterable[EpisodeColum
     with DatasetWriter(Path(path)) as w:
         for ep in episodes:
             n = _episode_rows(ep, f"{attrs['dataset_id']}, episode {len(lengths)}")
-            w.append(OBSERVATIONS, ep.observations)
-            w.append(actions_name, np.asarray(ep.actions, dtype=np.int64))
-            w.append(REWARDS, np.asarray(ep.rewards, dtype=np.float64))
-            w.append(TERMINATIONS, np.asarray(ep.terminations, dtype=bool))
-            w.append(TRUNCATIONS, np.asarray(ep.truncations, dtype=bool))
+            w.append_steps(actions_name, ep.observations, ep.actions, ep.rewards,
+                           ep.terminations, ep.truncations)  # fmt: skip
             seeds.append(int(ep.seed))
             lengths.append(n)
             returns.append(float(np.sum(np.asarray(ep.rewards, dtype=np.float64))))
             on_episode(n)
         if not lengths:
             raise DatasetError(f"{attrs['dataset_id']}: no episode to write")
-        length = np.asarray(lengths, dtype=np.int64)
-        starts = np.concatenate([[0], np.cumsum(length)[:-1]]).astype(np.int64)
-        w.append(episode_column("obs_offset"), starts + np.arange(len(length)))
-        w.append(episode_column("transition_offset"), starts)
-        w.append(episode_column("length"), length)
-        w.append(episode_column("seed"), np.asarray(seeds, dtype=np.int64))
-        w.append(episode_column("return"), np.asarray(returns, dtype=np.float64))
-        n_tr = int(length.sum())
+        n_tr = w.append_episode_index(lengths, seeds, returns)
         if callable(reference):
             reference = reference(np.asarray(returns, dtype=np.float64))
         w.attrs.update({
             **attrs, "format": FORMAT_NAME, "format_version": FORMAT_VERSION, "kind": kind,
             "observation_space": space_to_json(observation_space),
             "action_space": space_to_json(action_space), "overrides": to_json([]),
-            "num_episodes": len(length), "num_transitions": n_tr,
-            "num_observations": n_tr + len(length),
+            "num_episodes": len(lengths), "num_transitions": n_tr,
+            "num_observations": n_tr + len(lengths),
             "reference_expert_mean": float(reference.expert_mean),
             "reference_random_mean": float(reference.random_mean),
         })

@@ -22,7 +22,11 @@ from abco_data.format.schema import (
     IMAGE_GZIP_LEVEL,
     OBSERVATIONS,
     PALETTE,
+    REWARDS,
+    TERMINATIONS,
+    TRUNCATIONS,
     chunk_rows,
+    episode_column,
 )
 from abco_data.palette import (
     MAX_COLOURS_4BIT,
@@ -183,6 +187,29 @@ class DatasetWriter:
             palette = name == OBSERVATIONS and is_palette_candidate(rows.shape[1:], rows.dtype)
             self._columns[name] = _Column(group, leaf, rows.shape[1:], rows.dtype, palette)
         self._columns[name].append(rows)
+
+    def append_steps(self, actions_name: str, observations: Any, actions: Any, rewards: Any,
+                     terminations: Any, truncations: Any) -> None:  # fmt: skip
+        """Append one episode's step columns, each in its schema dtype (``actions_name``:
+        the kind's action column)."""
+        self.append(OBSERVATIONS, observations)
+        self.append(actions_name, np.asarray(actions, dtype=np.int64))
+        self.append(REWARDS, np.asarray(rewards, dtype=np.float64))
+        self.append(TERMINATIONS, np.asarray(terminations, dtype=bool))
+        self.append(TRUNCATIONS, np.asarray(truncations, dtype=bool))
+
+    def append_episode_index(self, lengths: Any, seeds: Any, returns: Any) -> int:
+        """Append the episodes' columns (offsets, length, seed, return) of episodes of
+        ``lengths`` transitions; the number of transitions."""
+        length = np.asarray(lengths, dtype=np.int64)
+        starts = np.concatenate([[0], np.cumsum(length)[:-1]]).astype(np.int64)
+        # an episode of n transitions has n + 1 observations
+        self.append(episode_column("obs_offset"), starts + np.arange(len(length)))
+        self.append(episode_column("transition_offset"), starts)
+        self.append(episode_column("length"), length)
+        self.append(episode_column("seed"), np.asarray(seeds, dtype=np.int64))
+        self.append(episode_column("return"), np.asarray(returns, dtype=np.float64))
+        return int(length.sum())
 
     def write(self, name: str, data: np.ndarray) -> None:
         """Write a whole small array (uncompressed) as dataset ``name``."""

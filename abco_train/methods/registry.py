@@ -8,13 +8,11 @@ imported by :func:`load_plugins` (``--plugin``), the same for ``abco train`` and
 from __future__ import annotations
 
 import importlib
-import importlib.util
-import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, fields
-from pathlib import Path
 from typing import Any, TypeVar
 
+from abco_data.user_code import import_user_module, names_a_file
 from abco_train.config.fields import MethodOptions
 from abco_train.config.run import MOVED_TO_METHOD_OPTIONS, ConfigError, RunConfig, comparable
 from abco_train.methods.base import Method
@@ -184,31 +182,13 @@ def load_plugins(plugins: Sequence[str]) -> None:
 
 def _import_plugin(plugin: str) -> str:
     """Import ``plugin`` (once); its module name."""
-    if plugin.endswith(".py") or Path(plugin).is_file():
-        path = Path(plugin).resolve()
-        if not path.is_file():
-            raise PluginError(f"plugin file {plugin} does not exist")
-        name = f"abco_plugin_{path.stem}"
-        if name in sys.modules:
-            return name
-        spec = importlib.util.spec_from_file_location(name, path)
-        if spec is None or spec.loader is None:
-            raise PluginError(f"cannot import plugin file {plugin}")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        try:
-            spec.loader.exec_module(module)
-        except Exception as exc:
-            del sys.modules[name]
-            raise PluginError(f"plugin {plugin} failed to import: "
-                              f"{type(exc).__name__}: {exc}") from exc  # fmt: skip
-        return name
     try:
-        importlib.import_module(plugin)
+        return import_user_module(plugin, "abco_plugin").__name__
+    except FileNotFoundError:
+        raise PluginError(f"plugin file {plugin} does not exist") from None
     except Exception as exc:
-        missing = isinstance(exc, ModuleNotFoundError) and exc.name is not None and \
-            f"{plugin}.".startswith(f"{exc.name}.")  # the plugin itself, not a module it imports
+        missing = not names_a_file(plugin) and isinstance(exc, ModuleNotFoundError) and \
+            exc.name is not None and f"{plugin}.".startswith(f"{exc.name}.")  # not an import of it
         raise PluginError(f"plugin module {plugin!r} not found ({exc})" if missing else
                           f"plugin {plugin} failed to import: {type(exc).__name__}: {exc}"
                           ) from exc  # fmt: skip
-    return plugin

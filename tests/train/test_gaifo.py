@@ -11,7 +11,8 @@ import sys
 import numpy as np
 import pytest
 import torch
-from train_testing import tiny_config
+from train_testing import GAIFO_TINY as TINY
+from train_testing import gaifo_config
 
 import abco_envs
 from abco_train.config.fields import add_field_options
@@ -40,17 +41,6 @@ from abco_train.methods.gaifo.options import (  # noqa: E402
 )
 
 ENVS = (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
-
-#: A tiny PPO: rounds of n_steps * n_envs = 32 env steps.
-TINY = {"rl_steps": 96, "n_envs": 2, "n_steps": 16, "batch_size": 16, "n_epochs": 1,
-        "d_batch_size": 16, "features_dim": 32, "net_arch": [16]}  # fmt: skip
-
-
-def gaifo_config(env_id, data, run_dir, **changes):
-    options = {**TINY, **changes.pop("method_options", {})}
-    return tiny_config(env_id, "gaifo", data, run_dir, device="cpu", method_options=options,
-                       **changes)  # fmt: skip
-
 
 def make_method(env_id, data, run_dir, **options) -> GAIfO:
     cfg = resolve_config(gaifo_config(env_id, data, run_dir, method_options=options))

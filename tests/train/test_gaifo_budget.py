@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from train_testing import tiny_config
+from train_testing import gaifo_config
 
 from abco_train.config.run import ConfigError, RunConfig, known_envs
 from abco_train.harness.loop import train
@@ -25,16 +25,6 @@ from abco_train.methods.gaifo.options import (  # noqa: E402
     GAIfOOptions,
     ppo_family,
 )
-
-#: Rounds of n_steps * n_envs = 32 env steps; 96 steps at most without a budget.
-TINY = {"rl_steps": 96, "n_envs": 2, "n_steps": 16, "batch_size": 16, "n_epochs": 1,
-        "d_batch_size": 16, "features_dim": 32, "net_arch": [16]}  # fmt: skip
-
-
-def gaifo_config(env_id, data, run_dir, **changes):
-    options = {**TINY, **changes.pop("method_options", {})}
-    return tiny_config(env_id, "gaifo", data, run_dir, device="cpu", method_options=options,
-                       **changes)  # fmt: skip
 
 
 def make_method(env_id, data, run_dir, **changes) -> GAIfO:

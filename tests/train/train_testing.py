@@ -64,3 +64,16 @@ def train_argv(cfg: Any, **changes: Any) -> list[str]:
               "eval-episodes": 2, "plot-layouts": 2, "eval-max-steps": 30, **changes}
     return ["train", "--quiet", "--no-plots",
             *[x for k, v in values.items() for x in (f"--{k}", str(v))]]
+
+
+#: GAIfO's tiny PPO: rounds of n_steps * n_envs = 32 env steps; 96 steps at most without a
+#: budget.
+GAIFO_TINY = {"rl_steps": 96, "n_envs": 2, "n_steps": 16, "batch_size": 16, "n_epochs": 1,
+              "d_batch_size": 16, "features_dim": 32, "net_arch": [16]}  # fmt: skip
+
+
+def gaifo_config(env_id, data, run_dir, **changes) -> RunConfig:
+    """A tiny GAIfO run's config (:data:`GAIFO_TINY`, ``changes``' method_options over it)."""
+    options = {**GAIFO_TINY, **changes.pop("method_options", {})}
+    return tiny_config(env_id, "gaifo", data, run_dir, device="cpu", method_options=options,
+                       **changes)  # fmt: skip
