@@ -36,6 +36,7 @@ import numpy as np
 
 from abco_train.report import aggregates
 from abco_train.report.headline import IFO_METHODS
+from abco_train.report.headline_plots import AGGREGATES_PNG, plot_aggregates
 
 __all__ = ["EVEN", "PROFILE_PNG", "Interval", "verdict", "standings", "Ranking", "compute",
            "section"]  # fmt: skip
@@ -133,9 +134,10 @@ def _fmt(x: Interval) -> str:
 
 def section(scores: Scores, tasks: Sequence[str], out: Path, labels: Mapping[str, str],
             csv_rows: list[dict[str, Any]], older: int = 0, reps: int | None = None,
-            ) -> tuple[list[str], Path | None]:  # fmt: skip
+            ) -> tuple[list[str], dict[str, Path]]:  # fmt: skip
     """The aggregates and the pairwise sections (Markdown lines, CSV rows appended to
-    ``csv_rows``) and the performance profiles' plot (``None``: not drawn).
+    ``csv_rows``) and their plots by name (``headline_profile``: the performance profiles,
+    ``headline_aggregates``: IQM and optimality gap; none when nothing was aggregated).
 
     Args:
         scores: ``method -> task -> seed -> score`` of the scored runs.
@@ -160,20 +162,23 @@ def section(scores: Scores, tasks: Sequence[str], out: Path, labels: Mapping[str
     if rl is None:
         note = (f"Not computed: {why}. `{aggregates.INSTALL_HINT}` adds the IQM, optimality gap"
                 " and probability of improvement with stratified bootstrap intervals.")
-        return [*head, *lines, "", note, "", *pair_head, note], None
+        return [*head, *lines, "", note, "", *pair_head, note], {}
     ranking = compute(scores, tasks, rl, reps)
     for m, lacking in ranking.left_out.items():
         lines.append(f"- left out: {m} (no scored run on {', '.join(lacking)})")
     if not ranking.matrices:
         return [*head, *lines, "", "No IfO method has scored runs on every task.", "",
-                *pair_head, "Nothing to compare."], None  # fmt: skip
+                *pair_head, "Nothing to compare."], {}  # fmt: skip
     lines += _aggregate_table(ranking, labels, n, csv_rows)
     png = aggregates.plot_profiles(
         ranking.profiles, ranking.profile_cis, ranking.taus, rl, labels, out / PROFILE_PNG,
         "score", f"Performance profiles of the headline score over {n} task(s) (95%"
         " stratified bootstrap bands)", 1.0)  # fmt: skip
-    lines += ["", f"![Performance profiles: fraction of runs with score > tau]({png.name})"]
-    return [*head, *lines, "", *pair_head, *_pair_lines(ranking, labels, n, csv_rows)], png
+    bars = plot_aggregates(ranking.iqm, ranking.gap, rl, labels, out / AGGREGATES_PNG)
+    lines += ["", f"![IQM and optimality gap with 95% intervals]({bars.name})",
+              "", f"![Performance profiles: fraction of runs with score > tau]({png.name})"]
+    plots = {"headline_aggregates": bars, "headline_profile": png}
+    return [*head, *lines, "", *pair_head, *_pair_lines(ranking, labels, n, csv_rows)], plots
 
 
 def _aggregate_table(ranking: Ranking, labels: Mapping[str, str], n: int,

@@ -49,6 +49,7 @@ from abco_train.report import (
     ranking,
     tables,
 )
+from abco_train.report.headline_plots import TASKS_PNG, plot_task_scores
 from abco_train.report.plots import plot_label_distributions, plot_performance
 from abco_train.report.published import PAPER_TABLE2, published
 from abco_train.report.runs import (
@@ -144,8 +145,8 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
 
     Returns:
         The written files by name (``report``, ``csv``, and the plots that had data:
-        ``headline_profile``, ``budget_curves``, ``performance``, ``labels``, ``profile``,
-        ``generalisation``).
+        ``headline_tasks``, ``headline_aggregates``, ``headline_profile``, ``budget_curves``,
+        ``performance``, ``labels``, ``profile``, ``generalisation``).
 
     Every file is first written into a hidden staging folder in ``out``, then moved into
     place once all were written: a report that fails (a full or read-only disk) leaves the
@@ -192,12 +193,11 @@ def _compose(runs_dir: Path, runs: list[Run], skipped: list[Skipped], out: Path,
     files: dict[str, Path] = {}
     if by_task:
         flags = provenance.flagged_counts(runs, current)
-        lines, png = _benchmark(by_task, flags, skipped, out, csv_rows)
+        lines, pngs = _benchmark(by_task, flags, skipped, out, csv_rows)
         track_runs = [r for task_runs in by_task.values() for r in task_runs]
         md += [*lines, "", *headline_goals.goals_section(headline.task_cells(by_task),
                                                          track_runs, csv_rows, wall)]  # fmt: skip
-        if png is not None:
-            files["headline_profile"] = png
+        files.update(pngs)
     if budget_curves is not None:
         data = curves.curves(by_task, budget_curves, skipped)
         lines, png = curves.section(data, out, headline.HEADLINE_LABELS, csv_rows)
@@ -222,13 +222,16 @@ def _compose(runs_dir: Path, runs: list[Run], skipped: list[Skipped], out: Path,
 
 def _benchmark(by_task: dict[str, list[Run]], flags: dict[tuple[str, str], dict[str, int]],
                skipped: list[Skipped], out: Path, csv_rows: list[dict[str, Any]]
-               ) -> tuple[list[str], Path | None]:  # fmt: skip
+               ) -> tuple[list[str], dict[str, Path]]:  # fmt: skip
     """The benchmark track's sections: a table per task, the aggregates over tasks and the
-    pairwise comparisons of the IfO methods (their profile plot drawn into ``out``)."""
+    pairwise comparisons of the IfO methods (their plots drawn into ``out``, by name)."""
     cells = headline.task_cells(by_task)
     track = [r for runs in by_task.values() for r in runs]
     md = ["", "## Headline: the benchmark track, task by task", "",
           *headline.intro(len(cells), len(track), _settings(track, skipped))]  # fmt: skip
+    tasks_png = plot_task_scores(cells, headline.HEADLINE_LABELS, out / TASKS_PNG)
+    if tasks_png is not None:
+        md += ["", f"![Headline score per task, 95% intervals]({tasks_png.name})"]
     for task, by_method in cells.items():
         flagged = {m: c for (t, m), c in flags.items() if t == task}
         md += ["", *headline.task_table(task, by_method, flagged, csv_rows)]
@@ -239,9 +242,9 @@ def _benchmark(by_task: dict[str, list[Run]], flags: dict[tuple[str, str], dict[
         if c.scored and c.values:
             scores.setdefault(c.method, {})[c.task] = c.values
     older = sum(c.older if c.scored else len(c.values) for c in ifo)
-    lines, png = ranking.section(scores, list(cells), out, headline.HEADLINE_LABELS, csv_rows,
-                                 older)  # fmt: skip
-    return [*md, "", *lines], png
+    lines, pngs = ranking.section(scores, list(cells), out, headline.HEADLINE_LABELS, csv_rows,
+                                  older)  # fmt: skip
+    return [*md, "", *lines], pngs | ({"headline_tasks": tasks_png} if tasks_png else {})
 
 
 def _paper_track(runs: list[Run], skipped: list[Skipped], out: Path, labels_env: str,

@@ -164,7 +164,10 @@ def test_aggregates_rank_the_ifo_methods(reported: dict[str, Any]) -> None:
     gap = next(r for r in reported["rows"] if r["table"] == "headline-aggregate"
                and r["method"] == "gaifo" and r["metric"] == "optimality_gap")  # fmt: skip
     assert float(gap["mean"]) == pytest.approx(0.89)  # 1 - 0.11: the mean of max(1 - x, 0)
-    assert reported["files"]["headline_profile"].stat().st_size > 0
+    for name in ("headline_profile", "headline_aggregates", "headline_tasks"):
+        png = reported["files"][name]
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert f"]({png.name})" in reported["md"]
 
 
 def test_pairwise_verdicts(reported: dict[str, Any]) -> None:
@@ -228,6 +231,8 @@ def test_without_the_current_code_version_or_rliable(tmp_path: Path,
         assert "Not computed: rliable is not installed" in _section(reported["md"], heading)
     assert _table(reported["md"], "maze5-heldout")["ABCO(α)"][4] == "0.810 [0.800, 0.820]"
     assert "headline_profile" not in reported["files"]
+    assert "headline_aggregates" not in reported["files"]
+    assert reported["files"]["headline_tasks"].stat().st_size > 0  # drawn without rliable
     assert {r["table"] for r in reported["rows"]} == {"headline"}
 
 
