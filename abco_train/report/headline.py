@@ -38,7 +38,7 @@ from abco_train.report.tables import count_text, fmt, stat_row
 
 __all__ = ["IFO_METHODS", "TRUE_ACTION_METHODS", "REFERENCE_METHODS", "HEADLINE_LABELS",
            "NOTES", "OLDER", "headline_key", "headline_value", "split_tracks", "Cell",
-           "task_cells", "task_table", "intro"]  # fmt: skip
+           "task_cells", "overview_table", "task_table", "intro"]  # fmt: skip
 
 #: The IfO methods of the benchmark: the aggregates and the pairwise comparisons are theirs.
 IFO_METHODS = ("bco", "bco-alpha", "bco-alpha-torabi", "abco", "iupe", "ilpo", "gaifo")
@@ -224,6 +224,27 @@ def _row_order(cells: Mapping[str, Cell]) -> list[tuple[str, str]]:
     rows = [(str(i + 1) if cells[m].stats else "–", m) for i, m in enumerate(ranked)]
     rows += [("–", m) for m in cells if _role(m) == "true actions"]
     return rows + [("–", m) for m in REFERENCE_METHODS]
+
+
+def overview_table(cells: Mapping[str, Mapping[str, Cell]]) -> list[str]:
+    """Every method's mean score on every task, one row per method: the task tables at a
+    glance (their order of methods; ``(P)``: an older record's P, ``–``: not run)."""
+    methods = method_order({m for by_method in cells.values() for m in by_method})
+    rows = [m for m in methods if _role(m) in ("IfO", "other")]
+    rows += [m for m in methods if _role(m) == "true actions"]
+    rows += [m for m in REFERENCE_METHODS if m in methods]
+    lines = ["| Method | Role | " + " | ".join(escape(t, 80) for t in cells) + " |",
+             "|---|---|" + "---:|" * len(cells)]  # fmt: skip
+    for method in rows:
+        values = []
+        for by_method in cells.values():
+            cell = by_method.get(method)
+            s = cell.stats if cell is not None else None
+            values.append("–" if cell is None or s is None else
+                          fmt(s.mean) + ("" if cell.scored else " (P)"))  # fmt: skip
+        label = escape(HEADLINE_LABELS.get(method, method), 80)
+        lines.append(f"| {label} | {_role(method)} | " + " | ".join(values) + " |")
+    return lines
 
 
 def task_table(task: str, cells: Mapping[str, Cell], flagged: Mapping[str, Mapping[str, int]],

@@ -229,6 +229,8 @@ def _benchmark(by_task: dict[str, list[Run]], flags: dict[tuple[str, str], dict[
     track = [r for runs in by_task.values() for r in runs]
     md = ["", "## Headline: the benchmark track, task by task", "",
           *headline.intro(len(cells), len(track), _settings(track, skipped))]  # fmt: skip
+    md += ["", "Mean score over seeds, task by task (each task's table below gives its"
+           " interval, success rate and interactions):", "", *headline.overview_table(cells)]
     tasks_png = plot_task_scores(cells, headline.HEADLINE_LABELS, out / TASKS_PNG)
     if tasks_png is not None:
         md += ["", f"![Headline score per task, 95% intervals]({tasks_png.name})"]

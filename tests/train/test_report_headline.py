@@ -412,3 +412,16 @@ def test_a_run_stopped_over_budget_misses_the_goal(tmp_path: Path) -> None:
     lines = goals_section({}, load_runs(root), [], None)
     budget = next(x for x in lines if "budget" in x)
     assert budget.startswith("- missed") and "cartpole-short/abco/seed0" in budget
+
+
+def test_overview_gives_every_method_on_every_task(reported: dict[str, Any]) -> None:
+    part = _section(reported["md"], "## Headline: the benchmark track")
+    table = part.split("| Method | Role | ", 1)[1].split("\n\n", 1)[0].splitlines()
+    tasks = table[0].rstrip(" |").split(" | ")
+    rows = {r.split(" | ")[0].lstrip("| "): r.rstrip(" |").split(" | ")[2:] for r in table[2:]}
+    assert sorted(tasks) == sorted(TASKS)
+    column = dict(zip(tasks, range(len(tasks))))
+    assert rows["ABCO(α)"] == ["0.810"] * 3  # 0.8 + the seeds' 0.00-0.02
+    assert rows["BC"][column["maze5-heldout"]] == "0.910 (P)"  # older records: their P
+    assert rows["Random"][column["acrobot-budget"]] == "–"  # not run there
+    assert list(rows)[-3:] == ["BC", "Expert", "Random"]
