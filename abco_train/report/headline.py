@@ -38,7 +38,7 @@ from abco_train.report.tables import count_text, fmt, stat_row
 
 __all__ = ["IFO_METHODS", "TRUE_ACTION_METHODS", "REFERENCE_METHODS", "HEADLINE_LABELS",
            "NOTES", "OLDER", "headline_key", "headline_value", "split_tracks", "Cell",
-           "task_cells", "overview_table", "task_table", "intro"]  # fmt: skip
+           "task_cells", "role", "overview_table", "task_table", "intro"]  # fmt: skip
 
 #: The IfO methods of the benchmark: the aggregates and the pairwise comparisons are theirs.
 IFO_METHODS = ("bco", "bco-alpha", "bco-alpha-torabi", "abco", "iupe", "ilpo", "gaifo")
@@ -176,7 +176,8 @@ def task_cells(by_task: Mapping[str, Sequence[Run]]) -> dict[str, dict[str, Cell
     return out
 
 
-def _role(method: str) -> str:
+def role(method: str) -> str:
+    """A method's role in the tables: ``reference``, ``true actions``, ``IfO`` or ``other``."""
     if method in REFERENCE_METHODS:
         return "reference"
     if method in TRUE_ACTION_METHODS:
@@ -219,10 +220,10 @@ def _row_order(cells: Mapping[str, Cell]) -> list[tuple[str, str]]:
     """``(rank, method)``: the IfO and other methods by mean score (best first; a method with
     no result last, unranked), then the true-action methods and the references."""
     order = {m: i for i, m in enumerate(method_order(cells))}
-    ranked = sorted((m for m in cells if _role(m) in ("IfO", "other")),
+    ranked = sorted((m for m in cells if role(m) in ("IfO", "other")),
                     key=lambda m: (-cells[m].mean, order[m]))  # fmt: skip
     rows = [(str(i + 1) if cells[m].stats else "–", m) for i, m in enumerate(ranked)]
-    rows += [("–", m) for m in cells if _role(m) == "true actions"]
+    rows += [("–", m) for m in cells if role(m) == "true actions"]
     return rows + [("–", m) for m in REFERENCE_METHODS]
 
 
@@ -230,8 +231,8 @@ def overview_table(cells: Mapping[str, Mapping[str, Cell]]) -> list[str]:
     """Every method's mean score on every task, one row per method: the task tables at a
     glance (their order of methods; ``(P)``: an older record's P, ``–``: not run)."""
     methods = method_order({m for by_method in cells.values() for m in by_method})
-    rows = [m for m in methods if _role(m) in ("IfO", "other")]
-    rows += [m for m in methods if _role(m) == "true actions"]
+    rows = [m for m in methods if role(m) in ("IfO", "other")]
+    rows += [m for m in methods if role(m) == "true actions"]
     rows += [m for m in REFERENCE_METHODS if m in methods]
     lines = ["| Method | Role | " + " | ".join(escape(t, 80) for t in cells) + " |",
              "|---|---|" + "---:|" * len(cells)]  # fmt: skip
@@ -243,7 +244,7 @@ def overview_table(cells: Mapping[str, Mapping[str, Cell]]) -> list[str]:
             values.append("–" if cell is None or s is None else
                           fmt(s.mean) + ("" if cell.scored else " (P)"))  # fmt: skip
         label = escape(HEADLINE_LABELS.get(method, method), 80)
-        lines.append(f"| {label} | {_role(method)} | " + " | ".join(values) + " |")
+        lines.append(f"| {label} | {role(method)} | " + " | ".join(values) + " |")
     return lines
 
 
@@ -261,7 +262,7 @@ def task_table(task: str, cells: Mapping[str, Cell], flagged: Mapping[str, Mappi
         label = escape(HEADLINE_LABELS.get(method, method), 80)
         cell = cells.get(method)
         if cell is None:
-            lines.append(f"| – | {label} | {_role(method)} | 0 | not run | – | – |"
+            lines.append(f"| – | {label} | {role(method)} | 0 | not run | – | – |"
                          f" {NOTES.get(method, '–')} |")  # fmt: skip
             continue
         s = cell.stats
@@ -269,7 +270,7 @@ def task_table(task: str, cells: Mapping[str, Cell], flagged: Mapping[str, Mappi
         score = "–" if s is None else f"{fmt(s.mean)} [{fmt(s.ci[0])}, {fmt(s.ci[1])}]"
         score += "" if cell.scored or s is None else " (P)"
         success = fmt(float(np.mean(cell.success)), 2) if cell.success else "–"
-        lines.append(f"| {rank} | {label} | {_role(method)} | {seeds} | {score} | {success} |"
+        lines.append(f"| {rank} | {label} | {role(method)} | {seeds} | {score} | {success} |"
                      f" {_spent_text(cell)} | {_notes(cell, flagged.get(method, {}))} |")
         _csv(task, cell, csv_rows)
     not_run = [m for m in IFO_METHODS if m not in cells]

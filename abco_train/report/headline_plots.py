@@ -19,7 +19,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from abco_train.harness.plots import pyplot, save_figure
-from abco_train.report.headline import IFO_METHODS, REFERENCE_METHODS, Cell
+from abco_train.report.headline import Cell, role
 from abco_train.report.runs import method_order
 
 __all__ = ["TASKS_PNG", "AGGREGATES_PNG", "plot_task_scores", "plot_aggregates"]
@@ -30,14 +30,10 @@ AGGREGATES_PNG = "headline_aggregates.png"
 COLUMNS = 4
 #: ``(point, low, high)``.
 Interval = tuple[float, float, float]
-#: IfO methods in colour; the true-action reference and the scale's ends in greys.
-IFO_COLOUR, OTHER_COLOUR, REFERENCE_COLOUR = "tab:blue", "dimgrey", "silver"
-
-
-def _colour(method: str) -> str:
-    if method in REFERENCE_METHODS:
-        return REFERENCE_COLOUR
-    return IFO_COLOUR if method in IFO_METHODS else OTHER_COLOUR
+#: Colour by role (:func:`~abco_train.report.headline.role`): IfO methods in colour, the
+#: scale's ends in light grey, the true-action reference and other methods in dark grey.
+COLOURS = {"IfO": "tab:blue", "reference": "silver"}
+OTHER_COLOUR = "dimgrey"
 
 
 def plot_task_scores(cells: Mapping[str, Mapping[str, Cell]], labels: Mapping[str, str],
@@ -61,8 +57,9 @@ def plot_task_scores(cells: Mapping[str, Mapping[str, Cell]], labels: Mapping[st
             if stats is None:
                 continue
             low, high = stats.ci
+            colour = COLOURS.get(role(method), OTHER_COLOUR)
             ax.errorbar(stats.mean, row, xerr=[[stats.mean - low], [high - stats.mean]],
-                        fmt="o", ms=4, capsize=2, color=_colour(method))  # fmt: skip
+                        fmt="o", ms=4, capsize=2, color=colour)  # fmt: skip
         for end in (0.0, 1.0):
             ax.axvline(end, color="grey", ls=":", lw=1)
         ax.set_title(task, fontsize=8)

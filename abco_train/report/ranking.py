@@ -36,7 +36,7 @@ import numpy as np
 
 from abco_train.report import aggregates
 from abco_train.report.headline import IFO_METHODS
-from abco_train.report.headline_plots import AGGREGATES_PNG, plot_aggregates
+from abco_train.report.headline_plots import AGGREGATES_PNG, Interval, plot_aggregates
 
 __all__ = ["EVEN", "PROFILE_PNG", "Interval", "verdict", "standings", "Ranking", "compute",
            "section"]  # fmt: skip
@@ -45,8 +45,6 @@ __all__ = ["EVEN", "PROFILE_PNG", "Interval", "verdict", "standings", "Ranking",
 EVEN = 0.5
 PROFILE_PNG = "headline_profile.png"
 
-#: ``(point, low, high)``.
-Interval = tuple[float, float, float]
 Scores = Mapping[str, Mapping[str, Mapping[int, float]]]  # method -> task -> seed -> score
 
 
