@@ -6,7 +6,8 @@
 * **Precision**: every IfO method's aggregate IQM has a 95% interval narrower than 0.10.
 * **Budget**: no run spent more than its task's budget or stopped ``over_budget``.
 * **Wall time**: the grid within 4 hours (``bench_log.jsonl``:
-  :func:`abco_train.report.tables.wall`).
+  :func:`abco_train.report.tables.wall`); while the grid's last session stopped before its
+  end the time so far is "not yet" a verdict, unless it is already over.
 
 Example:
     >>> line = reference_line("random", {"cartpole": 0.01, "acrobot": -0.07}, 0.0)
@@ -105,21 +106,27 @@ def _budget(runs: Sequence[Run]) -> str:
             + (f"; over: {shown})" if over else ")"))
 
 
-def _wall(wall_s: float | None) -> str:
+def _wall(wall_s: float | None, unfinished: str | None) -> str:
     limit = HEADLINE_GOALS["wall_s"]
     if wall_s is None:
         return "- not checked: wall time (no bench_log.jsonl)"
+    if unfinished is not None:  # a partial grid's time says nothing of the whole grid's
+        verdict = "missed" if wall_s > limit else "not yet"
+        return (f"- {verdict}: the grid within {limit / 3600:g} h of wall time: "
+                f"{wall_s / 3600:.2f} h so far, the grid not finished ({escape(unfinished, 200)})")
     return (f"- {_verdict(wall_s <= limit)}: the grid within {limit / 3600:g} h of wall time: "
             f"{wall_s / 3600:.2f} h (see Wall time)")
 
 
 def goals_section(cells: Mapping[str, Mapping[str, Cell]], runs: Sequence[Run],
-                  csv_rows: Sequence[Mapping[str, Any]], wall_s: float | None) -> list[str]:
-    """The goals' section: one line per goal, met or missed, with its figures."""
+                  csv_rows: Sequence[Mapping[str, Any]], wall_s: float | None,
+                  unfinished: str | None = None) -> list[str]:  # fmt: skip
+    """The goals' section: one line per goal, met or missed, with its figures; ``unfinished``
+    says why the grid is not finished yet (its wall time is then no verdict unless over)."""
     refs = [reference_line(m, {t: by[m].mean for t, by in cells.items()
                                if m in by and by[m].stats}, target, list(cells))
             for m, target in (("random", 0.0), ("expert", 1.0))]  # fmt: skip
     return ["## Goals of the benchmark track", "",
             "Checked from the records above (the protocol's goals); a missed goal is reported "
             "with its figures.", "", *refs, *_headroom(cells), _precision(csv_rows),
-            _budget(runs), _wall(wall_s)]  # fmt: skip
+            _budget(runs), _wall(wall_s, unfinished)]  # fmt: skip

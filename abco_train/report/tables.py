@@ -13,6 +13,7 @@ Example:
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +36,7 @@ from abco_train.report.runs import (
 )
 from abco_train.report.stats import CellStats
 
-__all__ = ["table", "goals", "missing", "references", "all_runs", "wall", "seed_text",
+__all__ = ["table", "goals", "missing", "references", "all_runs", "wall", "GridWall", "seed_text",
            "count_text", "fmt", "ci_text", "stat_row"]  # fmt: skip
 
 #: Column titles of the interaction kinds.
@@ -321,8 +322,31 @@ def all_runs(grid: Grid, csv_rows: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
+@dataclass(frozen=True)
+class GridWall:
+    """The grid's wall time as ``bench_log.jsonl`` tells it.
+
+    Attributes:
+        seconds: The sessions' summed wall time (``None``: no log).
+        unfinished: Why the grid is not finished yet (its last session stopped before its end,
+            with its count of cells), or ``None`` when it is, or when there is no log.
+    """
+
+    seconds: float | None
+    unfinished: str | None = None
+
+
+def _unfinished(sessions: list[dict[str, Any]], done: int) -> str | None:
+    """Why the grid of ``sessions`` is unfinished: its last session did not reach its end."""
+    if not sessions or sessions[-1].get("finished") is not False:
+        return None
+    cells = sessions[-1].get("cells")
+    of = f" of {cells:,}" if isinstance(cells, int) else ""
+    return f"its last `abco bench` session stopped before its end; {done:,}{of} cells done"
+
+
 def wall(runs_dir: Path, grid: Grid, skipped: list[Skipped] | None = None
-         ) -> tuple[float | None, list[str]]:  # fmt: skip
+         ) -> tuple[GridWall, list[str]]:  # fmt: skip
     """The grid's wall time (``bench_log.jsonl``: sessions that ran cells) and its lines; a
     damaged line of the log goes to ``skipped`` (default: dropped)."""
     sessions = read_log(runs_dir, [] if skipped is None else skipped)
@@ -351,7 +375,8 @@ def wall(runs_dir: Path, grid: Grid, skipped: list[Skipped] | None = None
                      f" results.jsonl): {own:.1f} s of their own wall time, {own / jobs:.1f} s"
                      f" at {jobs} job(s) at once, counted in the grid's wall time"
                      f" ({wall_s:.1f} s, {wall_s / 3600:.2f} h).")  # fmt: skip
-    return wall_s, lines + _where_it_goes(grid, cell_wall)
+    done = len(grid.done) + len(grid.stopped)
+    return GridWall(wall_s, _unfinished(sessions, done)), lines + _where_it_goes(grid, cell_wall)
 
 
 def _where_it_goes(grid: Grid, cell_wall: float) -> list[str]:

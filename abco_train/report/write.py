@@ -196,7 +196,8 @@ def _compose(runs_dir: Path, runs: list[Run], skipped: list[Skipped], out: Path,
         lines, pngs = _benchmark(by_task, flags, skipped, out, csv_rows)
         track_runs = [r for task_runs in by_task.values() for r in task_runs]
         md += [*lines, "", *headline_goals.goals_section(headline.task_cells(by_task),
-                                                         track_runs, csv_rows, wall)]  # fmt: skip
+                                                         track_runs, csv_rows, wall.seconds,
+                                                         wall.unfinished)]  # fmt: skip
         files.update(pngs)
     if budget_curves is not None:
         data = curves.curves(by_task, budget_curves, skipped)

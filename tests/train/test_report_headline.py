@@ -425,3 +425,32 @@ def test_overview_gives_every_method_on_every_task(reported: dict[str, Any]) -> 
     assert rows["BC"][column["maze5-heldout"]] == "0.910 (P)"  # older records: their P
     assert rows["Random"][column["acrobot-budget"]] == "–"  # not run there
     assert list(rows)[-3:] == ["BC", "Expert", "Random"]
+
+
+@pytest.mark.parametrize("wall_s, verdict", [(3 * 3600.0, "not yet"), (5 * 3600.0, "missed")])
+def test_an_unfinished_grid_has_no_wall_time_verdict_yet(wall_s: float, verdict: str) -> None:
+    from abco_train.report.headline_goals import goals_section
+
+    why = "its last `abco bench` session stopped before its end; 556 of 700 cells done"
+    line = goals_section({}, [], [], wall_s, why)[-1]
+    assert line.startswith(f"- {verdict}: the grid within 4 h") and "556 of 700 cells" in line
+    assert goals_section({}, [], [], wall_s)[-1].startswith(
+        "- met" if wall_s < 4 * 3600 else "- missed")
+
+
+def test_the_report_reads_an_unfinished_grid_from_its_log(tmp_path: Path) -> None:
+    from abco_train.report.runs import Grid, load_runs
+    from abco_train.report.tables import wall
+
+    root = write_track(tmp_path / "grid", tasks=["cartpole-short"], methods=["abco"])
+    session = {"started": "2026-01-01T00:00:00+00:00", "wall_s": 100.0, "backend": "local",
+               "jobs": 2, "threads": 1, "cells": 9, "ran": 3, "skipped": 0, "failed": [],
+               "argv": ["bench"], "results": "results.jsonl"}  # fmt: skip
+    log = root / "bench_log.jsonl"
+    log.write_text(json.dumps({**session, "finished": False}) + "\n")
+    grid = Grid(load_runs(root))
+    timed, _ = wall(root, grid)
+    assert timed.seconds == 100.0 and timed.unfinished is not None
+    assert f"{len(grid.done)} of 9 cells done" in timed.unfinished
+    log.write_text(json.dumps({**session, "finished": True}) + "\n")
+    assert wall(root, grid)[0].unfinished is None
