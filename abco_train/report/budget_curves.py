@@ -138,16 +138,25 @@ def _plot(data: Curves, path: Path, labels: Mapping[str, str]) -> Path | None:
     plt = pyplot()
     fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 3.4), squeeze=False)
     for ax, base in zip(axes.flat, panels):
-        for method in method_order(data[base]):
+        methods = method_order(data[base])
+        budgets: set[float] = set()
+        for i, method in enumerate(methods):
             points = [(b, c.stats) for b, c in data[base][method] if c.stats is not None]
             if not points:
                 continue
-            x = np.array([b for b, _ in points], dtype=float)
+            budgets.update(b for b, _ in points)
+            # methods side by side at each budget (a few percent apart on the log axis), so
+            # that their intervals do not hide each other
+            dodge = 1.04 ** (i - (len(methods) - 1) / 2)
+            x = np.array([b * dodge for b, _ in points], dtype=float)
             mean = np.array([s.mean for _, s in points])
             err = np.array([[s.mean - s.ci[0] for _, s in points],
                             [s.ci[1] - s.mean for _, s in points]])  # fmt: skip
             ax.errorbar(x, mean, yerr=err, marker="o", capsize=3, label=labels.get(method, method))
         ax.set_xscale("log")
+        ticks = sorted(budgets)  # one labelled tick per budget run, no log-scale minor labels
+        ax.set_xticks(ticks, [f"{t:,.0f}" for t in ticks], fontsize=8)
+        ax.minorticks_off()
         ax.set_title(base, fontsize=9)
         ax.set_xlabel("interaction budget")
         ax.set_ylabel("score (0 random, 1 expert)")
