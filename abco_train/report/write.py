@@ -186,7 +186,7 @@ def _compose(runs_dir: Path, runs: list[Run], skipped: list[Skipped], out: Path,
     benchmark track (records with a task) first, then the paper track (records without)."""
     by_task, paper_runs = headline.split_tracks(runs)
     csv_rows: list[dict[str, Any]] = []
-    wall, wall_lines = tables.wall(runs_dir, Grid(runs), skipped)
+    timed, wall_lines = tables.wall(runs_dir, Grid(runs), skipped)
     current, why = provenance.current_code_version()
     md = ["## Code versions", "", *provenance.versions_section(runs, current, why)]
     plots: list[Plot] = []
@@ -196,8 +196,8 @@ def _compose(runs_dir: Path, runs: list[Run], skipped: list[Skipped], out: Path,
         lines, pngs = _benchmark(by_task, flags, skipped, out, csv_rows)
         track_runs = [r for task_runs in by_task.values() for r in task_runs]
         md += [*lines, "", *headline_goals.goals_section(headline.task_cells(by_task),
-                                                         track_runs, csv_rows, wall.seconds,
-                                                         wall.unfinished)]  # fmt: skip
+                                                         track_runs, csv_rows, timed.seconds,
+                                                         timed.unfinished)]  # fmt: skip
         files.update(pngs)
     if budget_curves is not None:
         data = curves.curves(by_task, budget_curves, skipped)
@@ -207,8 +207,8 @@ def _compose(runs_dir: Path, runs: list[Run], skipped: list[Skipped], out: Path,
             files["budget_curves"] = png
             md += [f"![Score against the interaction budget]({png.name})"]
     if paper_runs:
-        lines, plots, png = _paper_track(paper_runs, skipped, out, labels_env, baseline, wall,
-                                         csv_rows)  # fmt: skip
+        lines, plots, png = _paper_track(paper_runs, skipped, out, labels_env, baseline,
+                                         timed.seconds, csv_rows)  # fmt: skip
         md += lines
         if png is not None:
             files["profile"] = png
