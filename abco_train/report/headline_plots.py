@@ -85,7 +85,9 @@ def plot_aggregates(iqm: Mapping[str, Interval], gap: Mapping[str, Interval],
         points, intervals, metric_names=["IQM", "Optimality gap (lower is better)"],
         algorithms=[name[m] for m in order], xlabel="", subfigure_width=3.6,
         row_height=0.45)  # fmt: skip
-    # rliable sizes its text for slides and puts the x label below the figure: set both here
+    # rliable sizes the figure by its rows alone and its text for slides, and puts the x label
+    # below the figure: room for the titles and the label, and the text sized, here
+    fig.set_size_inches(3.6 * 2, 0.45 * len(order) + 1.3)
     for ax in axes:
         ax.tick_params(labelsize=8)
         ax.title.set_fontsize(9)
