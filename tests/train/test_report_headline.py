@@ -454,3 +454,21 @@ def test_the_report_reads_an_unfinished_grid_from_its_log(tmp_path: Path) -> Non
     assert f"{len(grid.done)} of 9 cells done" in timed.unfinished
     log.write_text(json.dumps({**session, "finished": True}) + "\n")
     assert wall(root, grid)[0].unfinished is None
+
+
+def test_the_aggregates_plot_has_room_for_few_methods(tmp_path: Path) -> None:
+    import struct
+
+    from abco_train.report.aggregates import load_rliable
+    from abco_train.report.headline import HEADLINE_LABELS
+    from abco_train.report.headline_plots import plot_aggregates
+
+    rl = load_rliable()[0]
+    if rl is None:
+        pytest.skip("rliable is not installed")
+    interval = {m: (0.5, 0.4, 0.6) for m in ("bco", "abco", "gaifo")}
+    png = plot_aggregates(interval, interval, rl, HEADLINE_LABELS, tmp_path / "a.png")
+    # rliable alone makes 0.45 in a row (135 px at 100 dpi for three): the titles, the
+    # labels and the bars overlapped
+    height = struct.unpack(">I", png.read_bytes()[20:24])[0]  # the PNG header's height
+    assert height >= 250
