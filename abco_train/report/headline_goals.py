@@ -126,7 +126,10 @@ def goals_section(cells: Mapping[str, Mapping[str, Cell]], runs: Sequence[Run],
     refs = [reference_line(m, {t: by[m].mean for t, by in cells.items()
                                if m in by and by[m].stats}, target, list(cells))
             for m, target in (("random", 0.0), ("expert", 1.0))]  # fmt: skip
+    partial = ("" if unfinished is None else
+               " The grid is not finished: each verdict covers the tasks and cells finished so "
+               "far, and may change when the rest is in.")  # fmt: skip
     return ["## Goals of the benchmark track", "",
             "Checked from the records above (the protocol's goals); a missed goal is reported "
-            "with its figures.", "", *refs, *_headroom(cells), _precision(csv_rows),
+            f"with its figures.{partial}", "", *refs, *_headroom(cells), _precision(csv_rows),
             _budget(runs), _wall(wall_s, unfinished)]  # fmt: skip

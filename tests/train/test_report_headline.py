@@ -432,8 +432,9 @@ def test_an_unfinished_grid_has_no_wall_time_verdict_yet(wall_s: float, verdict:
     from abco_train.report.headline_goals import goals_section
 
     why = "its last `abco bench` session stopped before its end; 556 of 700 cells done"
-    line = goals_section({}, [], [], wall_s, why)[-1]
-    assert line.startswith(f"- {verdict}: the grid within 4 h") and "556 of 700 cells" in line
+    lines = goals_section({}, [], [], wall_s, why)
+    assert lines[-1].startswith(f"- {verdict}: the grid within 4 h")
+    assert "556 of 700 cells" in lines[-1] and "The grid is not finished" in lines[2]
     assert goals_section({}, [], [], wall_s)[-1].startswith(
         "- met" if wall_s < 4 * 3600 else "- missed")
 
