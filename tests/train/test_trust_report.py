@@ -256,6 +256,19 @@ def test_every_published_record_passes(tmp_path: Path) -> None:
         assert all(check_final(r.final) for r in runs if r.final)
 
 
+def test_every_published_benchmark_track_record_passes() -> None:
+    """The headline grid's and the budget curves' records, scores, tasks and budgets included,
+    pass the schemas; a run its method stopped is a record too, never a damaged one."""
+    root = Path(__file__).resolve().parents[2] / "docs" / "results" / "headline"
+    for grid in (root / "runs", root / "budget-curves"):
+        skipped: list[Any] = []
+        runs = load_runs(grid, skipped)
+        assert skipped == [] and runs
+        assert all(r.status not in ("damaged", "unfinished") for r in runs)
+        assert all(check_final(r.final) and r.final.get("task") and r.final.get("budget")
+                   for r in runs if r.final)  # fmt: skip
+
+
 def test_escape_keeps_printable_text() -> None:
     assert escape("BCO(α) – ok") == "BCO(α) – ok"
     assert escape("a\tb\x00c\u202ed") == "a\\tb\\x00c\\u202ed"
