@@ -110,12 +110,11 @@ def _wall(wall_s: float | None, unfinished: str | None) -> str:
     limit = HEADLINE_GOALS["wall_s"]
     if wall_s is None:
         return "- not checked: wall time (no bench_log.jsonl)"
+    goal = f"the grid within {limit / 3600:g} h of wall time: {wall_s / 3600:.2f} h"
     if unfinished is not None:  # a partial grid's time says nothing of the whole grid's
         verdict = "missed" if wall_s > limit else "not yet"
-        return (f"- {verdict}: the grid within {limit / 3600:g} h of wall time: "
-                f"{wall_s / 3600:.2f} h so far, the grid not finished ({escape(unfinished, 200)})")
-    return (f"- {_verdict(wall_s <= limit)}: the grid within {limit / 3600:g} h of wall time: "
-            f"{wall_s / 3600:.2f} h (see Wall time)")
+        return f"- {verdict}: {goal} so far, the grid not finished ({escape(unfinished, 200)})"
+    return f"- {_verdict(wall_s <= limit)}: {goal} (see Wall time)"
 
 
 def goals_section(cells: Mapping[str, Mapping[str, Cell]], runs: Sequence[Run],

@@ -87,7 +87,7 @@ def plot_aggregates(iqm: Mapping[str, Interval], gap: Mapping[str, Interval],
         row_height=0.45)  # fmt: skip
     # rliable sizes the figure by its rows alone and its text for slides, and puts the x label
     # below the figure: room for the titles and the label, and the text sized, here
-    fig.set_size_inches(3.6 * 2, 0.45 * len(order) + 1.3)
+    fig.set_size_inches(fig.get_size_inches()[0], 0.45 * len(order) + 1.3)
     for ax in axes:
         ax.tick_params(labelsize=8)
         ax.title.set_fontsize(9)
