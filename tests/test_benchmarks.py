@@ -25,6 +25,8 @@ EXPECTED = {
                       "sample 100 transitions", "jpeg_encoding=False",
                       "abco read back the recorded frames bit for bit: yes", "goals:"],
     "bench_load.py": ["idle s", "loaded s", "ratio", "CartPole-v1"],
+    "bench_gpu.py": ["CUDA device:", "cpu arm: exit 0", "x cpu/cuda",
+                     "cartpole-authors-data       bc"],
     "bench_train.py": ["env", "method", "result", "AbcoMaze3x3-v0     abco       P=",
                        "CartPole-v1        abco       P="],
 }

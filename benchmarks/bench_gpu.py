@@ -1,0 +1,143 @@
+"""The GPU check: CUDA tests, then the same headline cells on CUDA and on CPU, side by side.
+
+Meant for a machine with an NVIDIA GPU, run first there and briefly (minutes): it prints the
+device torch sees, runs the tests that need CUDA (``pytest -k cuda``), then runs one seed of
+each method on two headline tasks through ``abco bench`` twice, ``--device cuda`` and
+``--device cpu`` (the two arms at once: the CPU arm on the CPU cores, the CUDA arm
+``--cuda-jobs`` cells at a time on the GPU), and prints each cell's wall time on both with the
+ratio CPU / CUDA and both scores. Training on CUDA is not bit-identical to CPU, so the scores
+may differ a little; a large gap is worth a look. The table goes to ``OUT/gpu_times.csv``
+beside the two grids.
+
+Usage::
+
+    python benchmarks/bench_gpu.py --out "$OUT"         # the check (minutes)
+    python benchmarks/bench_gpu.py --tasks cartpole-authors-data --methods bc,abco
+    python benchmarks/bench_gpu.py --tiny               # seconds: a smoke test, CPU arm only
+
+Without a CUDA device the CUDA tests and arm are skipped and said so; the CPU arm still runs.
+``--tiny`` runs two methods on CartPole with one short iteration and a tiny evaluation; its
+figures mean nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+TASKS = "cartpole-authors-data,maze3x3-heldout"
+METHODS = "bc,bco,bco-alpha,bco-alpha-torabi,abco,iupe,ilpo,gaifo"
+#: ``abco bench`` options of ``--tiny``: one short iteration, a tiny evaluation.
+TINY_OPTIONS = ("--iterations", "0", "--first-epochs-factor", "1", "--idm-epochs", "1",
+                "--policy-epochs", "1", "--eval-episodes", "2", "--eval-max-steps", "10")
+
+
+def describe_device() -> bool:
+    """Print what torch sees; whether a CUDA device is there."""
+    cuda = torch.cuda.is_available()
+    name = torch.cuda.get_device_name(0) if cuda else "none"
+    print(f"torch {torch.__version__}, CUDA build {torch.version.cuda}, CUDA device: {name}")
+    return cuda
+
+
+def cuda_tests() -> int:
+    """Run the tests that need CUDA; pytest's exit code."""
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-rs", "-k", "cuda",
+                           "-p", "no:cacheprovider", str(ROOT / "tests")],
+                          capture_output=True, text=True)
+    tail = done.stdout.strip().splitlines()[-1:] or ["(no output)"]
+    print(f"CUDA tests: exit {done.returncode}, {tail[0]}")
+    return done.returncode
+
+
+def start_arm(device: str, args: argparse.Namespace, out: Path, jobs: int) -> subprocess.Popen:
+    """Start ``abco bench`` on one device; its log goes to ``out/<device>.log``."""
+    cmd = [sys.executable, "-m", "abco_train", "bench", "--track", "headline",
+           "--tasks", args.tasks, "--methods", args.methods, "--seeds", str(args.seed),
+           "--device", device, "--jobs", str(jobs), "--threads", "1", "--no-plots",
+           "--out", str(out / device), *(TINY_OPTIONS if args.tiny else ())]
+    log = (out / f"{device}.log").open("w")
+    return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+
+
+def read_cells(grid: Path) -> dict[tuple[str, str], tuple[float, float | None]]:
+    """(task, method) -> (wall seconds, headline score) of each finished cell of a grid."""
+    cells: dict[tuple[str, str], tuple[float, float | None]] = {}
+    results = grid / "results.jsonl"
+    if not results.is_file():
+        return cells
+    for line in results.read_text().splitlines():
+        row = json.loads(line)
+        final = row.get("final") or {}
+        block = final.get(final.get("headline", ""), {})
+        score = block.get("score") if isinstance(block, dict) else None
+        if row.get("status") == "done":
+            cells[(row.get("task") or row["env"], row["method"])] = (row["wall_s"], score)
+    return cells
+
+
+def fmt(value: float | None, decimals: int) -> str:
+    """A figure in a 12-wide column, or '-' where there is none (a tiny run has no score)."""
+    return f"{'-':>12}" if value is None else f"{value:12.{decimals}f}"
+
+
+def report(out: Path, devices: list[str]) -> None:
+    """Print and write the cells' wall times and scores per device, with the ratio."""
+    grids = {device: read_cells(out / device) for device in devices}
+    keys = sorted(set().union(*grids.values()))
+    rows = []
+    for task, method in keys:
+        cpu = grids["cpu"].get((task, method), (None, None))
+        gpu = grids.get("cuda", {}).get((task, method), (None, None))
+        ratio = cpu[0] / gpu[0] if cpu[0] and gpu[0] else None
+        rows.append([task, method, cpu[0], gpu[0], ratio, cpu[1], gpu[1]])
+    header = ["task", "method", "cpu s", "cuda s", "x cpu/cuda", "cpu score", "cuda score"]
+    print(f"{header[0]:<28}{header[1]:<18}" + "".join(f"{h:>12}" for h in header[2:]))
+    for task, method, cpu_s, gpu_s, ratio, cpu_score, gpu_score in rows:
+        print(f"{task:<28}{method:<18}{fmt(cpu_s, 1)}{fmt(gpu_s, 1)}"
+              f"{fmt(ratio, 2)}{fmt(cpu_score, 3)}{fmt(gpu_score, 3)}")
+    with (out / "gpu_times.csv").open("w", newline="") as f:
+        csv.writer(f).writerows([header, *rows])
+
+
+def main() -> int:
+    """Run the check; exit 1 if the CUDA tests or an arm failed."""
+    parser = argparse.ArgumentParser(description="The GPU check: CUDA tests, CUDA against CPU.")
+    parser.add_argument("--out", type=Path, default=Path("runs/gpu-check"))
+    parser.add_argument("--tasks", default=TASKS, help="headline tasks, comma-separated")
+    parser.add_argument("--methods", default=METHODS, help="methods, comma-separated")
+    parser.add_argument("--seed", type=int, default=1000)
+    parser.add_argument("--cpu-jobs", type=int, default=4, help="CPU cells at a time")
+    parser.add_argument("--cuda-jobs", type=int, default=2, help="CUDA cells at a time")
+    parser.add_argument("--tiny", action="store_true", help="seconds: CartPole, two methods")
+    args = parser.parse_args()
+    if args.tiny:
+        args.tasks, args.methods = "cartpole-authors-data", "bc,bco"
+    args.out.mkdir(parents=True, exist_ok=True)
+    cuda = describe_device()
+    failed = cuda_tests() != 0 if cuda else False
+    if not cuda:
+        print("CUDA tests: skipped, no CUDA device; the CUDA arm is skipped too")
+    devices = ["cpu", "cuda"] if cuda else ["cpu"]
+    start = time.perf_counter()
+    jobs = {"cpu": args.cpu_jobs, "cuda": args.cuda_jobs}
+    arms = {d: start_arm(d, args, args.out, jobs[d]) for d in devices}
+    for device, arm in arms.items():
+        code = arm.wait()
+        print(f"{device} arm: exit {code} after {time.perf_counter() - start:.0f} s "
+              f"(log: {args.out / device}.log)")
+        failed |= code != 0
+    report(args.out, devices)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
