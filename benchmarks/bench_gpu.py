@@ -24,13 +24,14 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import torch
+
+from abco_train.bench.results_log import RESULTS_FILE, headline, read_results
 
 ROOT = Path(__file__).resolve().parents[1]
 TASKS = "cartpole-authors-data,maze3x3-heldout"
@@ -64,24 +65,17 @@ def start_arm(device: str, args: argparse.Namespace, out: Path, jobs: int) -> su
            "--tasks", args.tasks, "--methods", args.methods, "--seeds", str(args.seed),
            "--device", device, "--jobs", str(jobs), "--threads", "1", "--no-plots",
            "--out", str(out / device), *(TINY_OPTIONS if args.tiny else ())]
-    log = (out / f"{device}.log").open("w")
-    return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+    with (out / f"{device}.log").open("w") as log:  # the child keeps its own handle
+        return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
 
 
 def read_cells(grid: Path) -> dict[tuple[str, str], tuple[float, float | None]]:
     """(task, method) -> (wall seconds, headline score) of each finished cell of a grid."""
-    cells: dict[tuple[str, str], tuple[float, float | None]] = {}
-    results = grid / "results.jsonl"
-    if not results.is_file():
-        return cells
-    for line in results.read_text().splitlines():
-        row = json.loads(line)
-        final = row.get("final") or {}
-        block = final.get(final.get("headline", ""), {})
-        score = block.get("score") if isinstance(block, dict) else None
-        if row.get("status") == "done":
-            cells[(row.get("task") or row["env"], row["method"])] = (row["wall_s"], score)
-    return cells
+    if not (grid / RESULTS_FILE).is_file():  # the arm failed before its first cell
+        return {}
+    return {(row.get("task") or row["env"], row["method"]):
+            (row["wall_s"], headline(row["final"]).get("score"))
+            for row in read_results(grid).values() if row["status"] == "done"}
 
 
 def fmt(value: float | None, decimals: int) -> str:
