@@ -177,7 +177,7 @@ def _bench_plan(args: argparse.Namespace) -> tuple[Any, list[Any]]:
 
 
 def _bench_options(parser: argparse.ArgumentParser) -> None:
-    from abco_train.bench.backends import BACKENDS
+    from abco_train.bench.backends import BACKENDS, available_cores
 
     parser.add_argument("--envs", default=None, help="comma-separated env ids")
     parser.add_argument("--track", default=None, metavar="NAME|FILE.toml",
@@ -197,7 +197,9 @@ def _bench_options(parser: argparse.ArgumentParser) -> None:
                         "default: the standard datasets)")  # fmt: skip
     parser.add_argument("--out", required=True, help="the grid's folder (RUNS_DIR)")
     parser.add_argument("--jobs", type=count(MAX_JOBS), default=None,
-                        help=f"cells at once, at most {MAX_JOBS} (default: cores)")  # fmt: skip
+                        help=f"cells at once, at most {MAX_JOBS} (default: the cores, "
+                        f"{available_cores()} here); each cell gets cores / jobs torch threads "
+                        "(at least 1) unless --threads says otherwise")  # fmt: skip
     parser.add_argument("--backend", choices=BACKENDS, default="local")
     parser.add_argument("--address", default=None, help="Ray cluster address (ray backend)")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
@@ -214,9 +216,13 @@ def _train_options(method: str) -> Callable[[argparse.ArgumentParser], None]:
     """``abco train``'s options: the run config's, then ``method``'s own."""
 
     def options(parser: argparse.ArgumentParser) -> None:
-        from abco_train.methods.registry import options_class
+        from abco_train.methods.registry import method_names, options_class
 
         add_config_options(parser)
+        for action in parser._actions:  # every method registered now, plugins' included
+            if action.dest == "method":
+                action.help = (f"a registered method: {', '.join(method_names())}, or a "
+                               "plugin's (--plugin) (default: %(default)s)")
         try:
             cls = options_class(method)
         except ConfigError:  # an unknown method: refused, with the list, when the run starts
@@ -240,18 +246,12 @@ def _method_named(argv: Sequence[str]) -> str:
                 method = value
             elif value is not None:
                 plugins.append(value)
-    if plugins and method not in _builtin_names():
+    if plugins:  # its methods' options become flags, its names join the help's list
         from abco_train.methods.registry import PluginError, load_plugins
 
         with contextlib.suppress(PluginError):  # said as one error line when the run starts
             load_plugins(plugins)
     return method
-
-
-def _builtin_names() -> set[str]:
-    from abco_train.methods.registry import builtin_options
-
-    return set(builtin_options())
 
 
 # -- abco convert-checkpoint -----------------------------------------------------------------

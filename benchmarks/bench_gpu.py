@@ -1,11 +1,13 @@
 """The GPU check: CUDA tests, then the same headline cells on CUDA and on CPU, side by side.
 
 Meant for a machine with an NVIDIA GPU, run first there and briefly (minutes): it prints the
-device torch sees, runs the tests that need CUDA (``pytest -k cuda``), then runs one seed of
+device torch sees, runs the tests that need CUDA (those marked ``cuda``, in the files that hold
+them, :data:`CUDA_TEST_FILES`: no other test module is even imported), then runs one seed of
 each method on two headline tasks through ``abco bench`` twice, ``--device cuda`` and
 ``--device cpu`` (the two arms at once: the CPU arm on the CPU cores, the CUDA arm
 ``--cuda-jobs`` cells at a time on the GPU), and prints each cell's wall time on both with the
-ratio CPU / CUDA and both scores. Training on CUDA is not bit-identical to CPU, so the scores
+ratio CPU / CUDA and both scores, and the GPU's utilisation and memory in use while the arms ran
+(``nvidia-smi``, sampled every 2 s). Training on CUDA is not bit-identical to CPU, so the scores
 may differ a little; a large gap is worth a look. The table goes to ``OUT/gpu_times.csv``
 beside the two grids.
 
@@ -49,14 +51,46 @@ def describe_device() -> bool:
     return cuda
 
 
+#: The test files that hold the tests marked ``cuda`` (a test of this repository checks that
+#: no other file has one).
+CUDA_TEST_FILES = ("tests/train/test_train_cli.py",)
+
+
 def cuda_tests() -> int:
-    """Run the tests that need CUDA; pytest's exit code."""
-    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-rs", "-k", "cuda",
-                           "-p", "no:cacheprovider", str(ROOT / "tests")],
-                          capture_output=True, text=True)
+    """Run the tests marked ``cuda``; pytest's exit code."""
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-rs", "-m", "cuda",
+                           "-p", "no:cacheprovider", *(str(ROOT / f) for f in CUDA_TEST_FILES)],
+                          capture_output=True, text=True, cwd=ROOT)
     tail = done.stdout.strip().splitlines()[-1:] or ["(no output)"]
     print(f"CUDA tests: exit {done.returncode}, {tail[0]}")
     return done.returncode
+
+
+class GpuMonitor:
+    """Samples the GPU's utilisation (%) and memory in use (MiB) with ``nvidia-smi`` while
+    the arms run; :meth:`summary` is a line for the report."""
+
+    def __init__(self) -> None:
+        self.utilisation: list[float] = []
+        self.memory: list[float] = []
+
+    def sample(self) -> None:
+        try:
+            done = subprocess.run(["nvidia-smi", "--query-gpu=utilization.gpu,memory.used",
+                                   "--format=csv,noheader,nounits"],
+                                  capture_output=True, text=True, timeout=10)  # fmt: skip
+            util, memory = done.stdout.splitlines()[0].split(",")
+            self.utilisation.append(float(util))
+            self.memory.append(float(memory))
+        except (OSError, ValueError, IndexError, subprocess.SubprocessError):
+            pass  # no nvidia-smi, or an answer it could not give: no sample
+
+    def summary(self) -> str:
+        if not self.utilisation:
+            return "GPU utilisation: no samples (nvidia-smi did not answer)"
+        util, memory = self.utilisation, self.memory
+        return (f"GPU utilisation: mean {sum(util) / len(util):.0f}%, max {max(util):.0f}% "
+                f"over {len(util)} samples; memory in use: max {max(memory):.0f} MiB")
 
 
 def start_arm(device: str, args: argparse.Namespace, out: Path, jobs: int) -> subprocess.Popen:
@@ -124,12 +158,18 @@ def main() -> int:
     start = time.perf_counter()
     jobs = {"cpu": args.cpu_jobs, "cuda": args.cuda_jobs}
     arms = {d: start_arm(d, args, args.out, jobs[d]) for d in devices}
+    monitor = GpuMonitor()
+    while cuda and any(arm.poll() is None for arm in arms.values()):
+        monitor.sample()
+        time.sleep(2)
     for device, arm in arms.items():
         code = arm.wait()
         print(f"{device} arm: exit {code} after {time.perf_counter() - start:.0f} s "
               f"(log: {args.out / device}.log)")
         failed |= code != 0
     report(args.out, devices)
+    if cuda:
+        print(monitor.summary())
     return 1 if failed else 0
 
 

@@ -25,6 +25,9 @@ EXPECTED = {
                       "sample 100 transitions", "jpeg_encoding=False",
                       "abco read back the recorded frames bit for bit: yes", "goals:"],
     "bench_load.py": ["idle s", "loaded s", "ratio", "CartPole-v1"],
+    "bench_phases.py": ["wall s", "data", "pairs", "idm", "policy", "rollouts", "evaluation",
+                        "references", "records", "cartpole-authors-data       bco",
+                        "share of the wall time"],
     "bench_gpu.py": ["CUDA device:", "cpu arm: exit 0", "x cpu/cuda",
                      "cartpole-authors-data       bc"],
     "bench_train.py": ["env", "method", "result", "AbcoMaze3x3-v0     abco       P=",
@@ -47,3 +50,25 @@ def test_benchmark_runs_tiny(script, tmp_path):
     lines = done.stdout.splitlines()
     missing = [s for s in EXPECTED[script] if s not in done.stdout]
     assert not missing, f"{script} printed no {missing}:\n" + "\n".join(lines[-30:])
+
+
+def test_bench_gpu_runs_every_cuda_test():
+    """bench_gpu.py runs the tests marked ``cuda`` in the files it names: every such file."""
+    import re
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        from bench_gpu import CUDA_TEST_FILES
+    finally:
+        sys.path.pop(0)
+    marked = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "tests").rglob("test_*.py")
+                    if re.search(r"pytest\.mark\.cuda\b", p.read_text()))
+    assert marked == sorted(CUDA_TEST_FILES)
+
+
+def test_bench_phases_refuses_a_test_seed(tmp_path):
+    done = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_phases.py"),
+                           "--seed", "1000", "--out", str(tmp_path)],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
+    assert done.returncode == 2 and "is a test seed" in done.stderr

@@ -125,7 +125,8 @@ def run_grid(
         plugins: Modules or ``.py`` files to import first (in every worker too).
         backend: ``local`` (processes) or ``ray``.
         jobs: Cells at once (local default: the cores; ray default: as the cluster allows).
-        threads: Torch threads per cell (default 1, the trainer's, whatever ``jobs``).
+        threads: Torch threads per cell (default: the cores divided by ``jobs``, at least 1;
+            with the default ``jobs``, one).
         address: Ray cluster to join (``ray`` backend).
         quiet: No progress bar or per-cell lines.
         track: The track of a grid of task cells (:func:`~abco_train.bench.cells.plan_track`).
@@ -148,7 +149,9 @@ def run_grid(
     check_method_options([c.method for c in cells], overrides, method_options)
     cores = backends.available_cores()
     local_jobs = max(1, jobs or cores)
-    threads = int(threads or 1)  # the trainer's default, whatever the jobs
+    # jobs x threads fill the cores: one thread per cell at one cell per core (threads spin-wait
+    # on each other when cores are shared), the spare cores' threads when fewer cells run.
+    threads = int(threads or max(1, cores // local_jobs))
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {escape(out)} is not a folder")

@@ -187,8 +187,10 @@ def add_field_options(
         kind = base_type(hints[f.name])
         default = None if f.default is MISSING else f.default
         help_text = f.metadata.get("help", "")
-        if "(default:" not in help_text:  # a help text may name its default itself
-            help_text += f" (default: {shown_default if default is None else default})"
+        if "(default" not in help_text:  # a help text may name its default itself
+            empty = f.default_factory is not MISSING  # an empty dict or list by default
+            shown = "none" if empty else shown_default if default is None else default
+            help_text += f" (default: {shown})"
         kwargs: dict[str, Any] = {"default": None if unset_defaults else default,
                                   "dest": dest_prefix + f.name,
                                   "help": help_text.replace("%", "%%")}  # fmt: skip

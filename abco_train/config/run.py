@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from collections.abc import Collection, Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
@@ -60,8 +61,9 @@ from abco_train.config.limits import (
 )
 
 __all__ = [
-    "RunConfig", "ConfigError", "RUNTIME_FIELDS", "PRESETS", "PROTOCOLS", "ARCHS",
-    "CELL_ARCHS", "ARCHS_BY_KIND", "DEVICES", "IDM_INPUTS", "REGIMES", "MAX_LAYOUTS",
+    "RunConfig", "ConfigError", "default_run_name", "RUNTIME_FIELDS", "PRESETS",
+    "PROTOCOLS", "ARCHS", "CELL_ARCHS", "ARCHS_BY_KIND", "DEVICES", "IDM_INPUTS", "REGIMES",
+    "MAX_LAYOUTS",
     "MOVED_TO_METHOD_OPTIONS", "MAX_SEED", "MAX_THREADS", "MAX_ITERATIONS", "MAX_BATCH_SIZE",
     "MAX_PRE_TRANSITIONS", "MAX_EXPERT_EPISODES", "MAX_EVAL_EPISODES", "MAX_EVAL_MAX_STEPS",
     "MAX_PLOT_LAYOUTS", "env_kind", "known_envs", "comparable", "fresh_evaluation",
@@ -154,8 +156,8 @@ class RunConfig:
                       "Gymnasium id with Box observations and Discrete actions (module:Id-v0 "
                       "imports module first; give --expert-data and --pre-data)",
                       "AbcoMaze5x5-v0")  # fmt: skip
-    method: str = option("a registered method: bc, bco, bco-alpha, abco, attention, "
-                         "sampling-partial, sampling-whole, abco-whole, or a plugin's", "abco")
+    method: str = option("a registered method (abco train --help lists them) or a plugin's",
+                         "abco")
     seed: int = option("seed of everything (same seed, same CPU run)", 0, min=0,
                      max=MAX_SEED)
     preset: str = option("cpu (compact CNN on images), paper (the paper's ResNet-18) or general "
@@ -196,7 +198,8 @@ class RunConfig:
     expert_data: str | None = option("expert dataset id or HDF5 file (default: the env's)")
     pre_data: str | None = option("pre-demonstration dataset id or HDF5 file (default: the env's)")
     cache_dir: str | None = option("abco dataset cache (default $ABCO_DATA_HOME)")
-    run_dir: str | None = option("run folder (default runs/{env}-{method}-s{seed})")
+    run_dir: str | None = option("run folder (default runs/{env}-{method}-s{seed}, with the "
+                                 "preset and regime where they are not the defaults)")
     device: str = option("where the networks train and act: auto (cuda if available), cpu or "
                          "cuda", "auto", choices=DEVICES)
     threads: int = option("torch threads; 1 stays fast when other processes share the cores "
@@ -242,9 +245,7 @@ class RunConfig:
             if values[name] is None:  # a callable default depends on the env (a dataset id)
                 values[name] = default(self.env) if callable(default) else default
         if values["run_dir"] is None:
-            layouts = "" if self.layouts is None else f"-K{self.layouts}"
-            name = f"{self.env}-{self.method}{layouts}-s{self.seed}"
-            values["run_dir"] = str(Path("runs") / name)
+            values["run_dir"] = str(Path("runs") / default_run_name(self))
         return RunConfig(**values)
 
     def validate(self) -> RunConfig:
@@ -289,6 +290,31 @@ class RunConfig:
     def replace(self, **changes: Any) -> RunConfig:
         """A copy with some fields changed."""
         return replace(self, **changes)
+
+
+def default_run_name(config: RunConfig) -> str:
+    """The default run folder's name, ``{env}-{method}[-{preset}][-{regime}][-K{K}]-s{seed}``.
+
+    The preset and regime are named where they are not the defaults, so runs of the same env,
+    method and seed under another preset or regime never share a folder; every character but
+    letters, digits, ``.``, ``_`` and ``-`` becomes ``_`` (an env ``module:Id`` has a colon,
+    which some file systems and tools refuse).
+
+    Example:
+        >>> default_run_name(RunConfig(env="AbcoMaze5x5-v0", preset="paper"))
+        'AbcoMaze5x5-v0-abco-paper-s0'
+        >>> default_run_name(RunConfig(env="corridor:Corridor-v0", method="bco", seed=3))
+        'corridor_Corridor-v0-bco-s3'
+    """
+    parts = [config.env, config.method]
+    if config.preset != "cpu":
+        parts.append(config.preset)
+    if config.regime != "default":
+        parts.append(config.regime)
+    if config.layouts is not None:
+        parts.append(f"K{config.layouts}")
+    parts.append(f"s{config.seed}")
+    return re.sub(r"[^A-Za-z0-9._-]", "_", "-".join(parts))
 
 
 def _check_datasets(config: RunConfig) -> None:

@@ -11,6 +11,11 @@ every bit (:func:`from_saved`): a resumed run is the run it would have been. Wha
 checked before use (:func:`load_checkpoint`, :func:`load_method_state`): its keys and types,
 an iteration of the run, tensors no larger than the file, a method state that fits the method.
 
+A checkpoint is read into CPU memory whatever device wrote it, and every tensor of the method's
+state it restores lands on the device of the tensor it replaces (:func:`place_like`): sampling
+indices beside the data they index, networks and optimisers on the run's device. So a CUDA
+run resumes on the CPU and a CPU run on CUDA.
+
 A checkpoint of an older abco (a pickle of numpy arrays, or of other objects) is refused with
 the command that converts it, ``abco convert-checkpoint RUN_DIR``
 (:func:`convert_legacy_checkpoint`), the one place that unpickles; only for run folders you
@@ -46,7 +51,7 @@ from abco_train.methods.base import INTERACTION_KINDS, Method
 
 __all__ = ["FORMAT", "LegacyCheckpointError", "save_checkpoint", "load_checkpoint",
            "check_state", "load_method_state", "restore", "to_saved", "from_saved",
-           "convert_legacy_checkpoint"]  # fmt: skip
+           "place_like", "convert_legacy_checkpoint"]  # fmt: skip
 
 #: The checkpoint format: 2 holds data only (1, unversioned, was a pickle).
 FORMAT = 2
@@ -213,8 +218,8 @@ def _write(path: Path, payload: dict[str, Any]) -> None:
     write_atomic(path, lambda tmp: tmp.write_bytes(buffer.getbuffer()))
 
 
-def load_checkpoint(path: Path, device: str) -> dict[str, Any] | None:
-    """The checkpoint's state on ``device`` (a GPU run resumes on CPU), ``None`` without one.
+def load_checkpoint(path: Path) -> dict[str, Any] | None:
+    """The checkpoint's state in CPU memory (whatever device wrote it), ``None`` without one.
 
     Its structure is checked (:func:`check_state`); the iteration against the run's by
     :func:`load_method_state`.
@@ -229,10 +234,10 @@ def load_checkpoint(path: Path, device: str) -> dict[str, Any] | None:
         return None
     with open_regular(path) as handle:
         raw = handle.read()  # read errors are the disk's; what follows, the file's
-    return check_state(from_saved(_safe_load(raw, path, device), str(path)), path)
+    return check_state(from_saved(_safe_load(raw, path), str(path)), path)
 
 
-def _safe_load(raw: bytes, path: Path, device: str) -> Any:
+def _safe_load(raw: bytes, path: Path) -> Any:
     """``torch.load(weights_only=True)`` of a checkpoint's bytes: data only, never code.
 
     Raises:
@@ -240,7 +245,7 @@ def _safe_load(raw: bytes, path: Path, device: str) -> Any:
         RunFolderError: It is damaged.
     """
     try:
-        return torch.load(io.BytesIO(raw), map_location=device, weights_only=True)
+        return torch.load(io.BytesIO(raw), map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
         if "GLOBAL" in str(exc) or "Unsupported" in str(exc):  # names a class or function
             raise LegacyCheckpointError(_legacy_message(path)) from None
@@ -299,7 +304,7 @@ def load_method_state(method: Method, state: dict[str, Any], path: Path) -> int:
         raise RunFolderError(f"{path} is at iteration {iteration} of a run of {total} "
                              "iterations; delete it to restart the run")  # fmt: skip
     try:
-        method.load_state_dict(state["method"])
+        method.load_state_dict(place_like(state["method"], method.state_dict()))
     except (KeyError, TypeError, ValueError, RuntimeError, IndexError, AttributeError) as exc:
         reason = " ".join(str(exc).split())[:300]
         raise RunFolderError(f"{path} does not fit the run's {type(method).__name__} "
@@ -307,6 +312,28 @@ def load_method_state(method: Method, state: dict[str, Any], path: Path) -> int:
                              "run") from None  # fmt: skip
     method.interactions.update(state.get("interactions", {}))
     return iteration
+
+
+def place_like(restored: Any, current: Any) -> Any:
+    """``restored`` with each tensor on the device of the tensor at the same place (key, index)
+    of ``current``, the method's state before the restore; tensors with no counterpart, and
+    everything else, as they are.
+
+    Example:
+        >>> fresh = {"indices": torch.zeros(2, dtype=torch.long, device="meta"), "n": 1}
+        >>> place_like({"indices": torch.arange(2), "n": 3}, fresh)["indices"].device
+        device(type='meta')
+    """
+    if isinstance(restored, torch.Tensor):
+        if isinstance(current, torch.Tensor) and restored.device != current.device:
+            return restored.to(current.device)
+        return restored
+    if isinstance(restored, dict) and isinstance(current, dict):
+        return type(restored)((k, place_like(v, current.get(k))) for k, v in restored.items())
+    if (isinstance(restored, (list, tuple)) and isinstance(current, (list, tuple))
+            and len(restored) == len(current)):  # fmt: skip
+        return type(restored)(place_like(v, c) for v, c in zip(restored, current))
+    return restored
 
 
 def restore(method: Method, state: dict[str, Any], cfg: RunConfig, path: Path) -> int:
@@ -347,7 +374,7 @@ def convert_legacy_checkpoint(run_dir: str | os.PathLike[str]) -> Path:
         with open_regular(path) as handle:
             raw = handle.read()
         try:
-            check_state(from_saved(_safe_load(raw, path, "cpu")), path)
+            check_state(from_saved(_safe_load(raw, path)), path)
             return path  # data already
         except LegacyCheckpointError:
             pass

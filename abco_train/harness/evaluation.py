@@ -147,7 +147,25 @@ def format_table(final: dict[str, Any]) -> str:
         mark = " *" if key == final.get("headline") else ""
         lines.append(f"{key:<18}{shown}{m['performance']:>8.3f}{m['aer']:>10.3f}"
                      f"{m['success_rate']:>9.2f}{m['episodes']:>10d}{mark}")
+    lines += _legend(final, [key for key, _ in rows])
     for name, path in final.get("figures", {}).items():
         lines.append(f"plot {name}: {path}")
     return "\n".join(lines)
+
+
+def _legend(final: dict[str, Any], keys: list[str]) -> list[str]:
+    """What the table's columns and mark mean, in a few lines under it."""
+    headline = final.get("headline")
+    lines = ["score: 0 = a uniform random policy, 1 = the expert, both measured the same way "
+             "(protocol, layouts); P: the ABCO paper's performance measure; AER: mean episode "
+             "return."]  # fmt: skip
+    if headline in keys:
+        lines.append(f"* {headline}: the block this run is ranked by.")
+    negative = [k for k in keys if k.endswith("/standard")
+                and (final[k].get("score") or 0.0) < 0]  # fmt: skip
+    if negative:
+        lines.append("standard: the env's own rules, up to 1,000 steps an episode; a policy "
+                     "that loops where a random walk would stumble on the goal scores below "
+                     "0 there (paper: the 4th visit of a cell ends the episode).")
+    return lines
 

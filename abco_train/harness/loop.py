@@ -20,7 +20,9 @@ past its budget anyway ends the run with status ``over_budget``.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -48,9 +50,13 @@ from abco_train.harness.run_folder import (
     read_capped,
     write_atomic,
 )
-from abco_train.harness.run_lock import run_folder_lock
+from abco_train.harness.run_lock import HOLDER_FILE, LOCK_FILE, run_folder_lock
 from abco_train.harness.runtime import resolve_device, seed_everything
-from abco_train.harness.training_data import TrainingData, load_training_data
+from abco_train.harness.training_data import (
+    TrainingData,
+    check_dataset_paths,
+    load_training_data,
+)
 from abco_train.methods.base import INTERACTION_KINDS, BudgetExceeded, Method, TrainingFailed
 from abco_train.methods.registry import get_method, identity, resolve_config
 
@@ -87,8 +93,25 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
         return stored
     abco_envs.check_env_dependencies(cfg.env)  # LunarLander without Box2D: the extra, in a line
     use_success_rule(cfg.env, cfg.success)  # --success, or terminated for an env of the user's
-    with run_folder_lock(run_dir, "abco train"):
-        return _train(cfg, run_dir, stop_after)
+    check_dataset_paths(cfg)  # "no such file", before the folder is touched
+    new_folder = not os.path.lexists(run_dir)
+    try:
+        with run_folder_lock(run_dir, "abco train"):
+            return _train(cfg, run_dir, stop_after)
+    except BaseException:
+        if new_folder:  # refused (or stopped) before its first iteration: leave no folder
+            _remove_unstarted(run_dir)
+        raise
+
+
+def _remove_unstarted(run_dir: Path) -> None:
+    """Delete a folder this run created if it holds nothing but its config and lock files."""
+    with contextlib.suppress(OSError):
+        names = {p.name for p in run_dir.iterdir()}
+        if names <= {CONFIG, LOCK_FILE, HOLDER_FILE}:
+            for name in names:
+                (run_dir / name).unlink()
+            run_dir.rmdir()
 
 
 def _train(cfg: RunConfig, run_dir: Path, stop_after: int | None) -> dict[str, Any] | None:
@@ -171,7 +194,7 @@ def _open_run_folder(run_dir: Path, cfg: RunConfig) -> dict[str, Any] | None:
     if (run_dir / FINAL).exists() and config_differences(run_dir, asdict(cfg)):
         raise RunFolderError(f"{run_dir} holds a run of another config (finished); use "
                              "another --run-dir or delete it")  # fmt: skip
-    state = load_checkpoint(run_dir / CHECKPOINT, cfg.device)
+    state = load_checkpoint(run_dir / CHECKPOINT)
     if state is not None and config_differences(run_dir, asdict(cfg)):  # damaged: one line
         raise RunFolderError(f"{run_dir}/{CONFIG} is not the config of its checkpoint's run; "
                              "use another --run-dir or delete the folder")  # fmt: skip

@@ -62,6 +62,8 @@ def save_figure(fig: Any, path: Path) -> Path:
 def plot_metrics(history: list[dict[str, Any]], path: Path) -> Path:
     """P, AER and success rate of the per-iteration evaluations, and the IDM's held-out
     accuracy (overall and per action) where the method has an IDM."""
+    from matplotlib.ticker import MaxNLocator
+
     plt = pyplot()
     rows = [h for h in history if "eval" in h]
     its = [h["iteration"] for h in rows]
@@ -69,10 +71,12 @@ def plot_metrics(history: list[dict[str, Any]], path: Path) -> Path:
     fig, axes = plt.subplots(1, 4 if idm else 3, figsize=(16 if idm else 12, 3.2))
     for ax, key, title in zip(axes, ("performance", "aer", "success_rate"),
                               ("Performance P", "AER", "Success rate")):  # fmt: skip
-        ax.plot(its, [h["eval"][key] for h in rows], marker="o")
+        values = [h["eval"][key] for h in rows]
+        ax.plot(its, values, marker="o")
         ax.set_title(title)
         ax.set_xlabel("iteration")
         ax.grid(alpha=0.3)
+        ax.set_ylim(*((0.0, 1.0) if key == "success_rate" else _visible_range(values)))
     if idm:
         ax, x = axes[3], [h["iteration"] for h in idm]
         ax.plot(x, [h["train"]["idm_val_accuracy"] for h in idm], marker="o", color="black",
@@ -90,7 +94,25 @@ def plot_metrics(history: list[dict[str, Any]], path: Path) -> Path:
         ax.set_ylim(0, 1.02)
         ax.legend(fontsize=7, ncol=2)
         ax.grid(alpha=0.3)
+    for ax in axes:  # iterations are whole numbers
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     return save_figure(fig, path)
+
+
+def _visible_range(values: list[float]) -> tuple[float, float]:
+    """Y limits that show a curve's changes at their size: at least 0.1 high (or a tenth of
+    the values' magnitude), so rounding noise on a flat curve stays a flat line.
+
+    Example:
+        >>> _visible_range([0.9951, 0.9958])
+        (0.94045, 1.05045)
+    """
+    finite = [v for v in values if np.isfinite(v)] or [0.0]
+    low, high = min(finite), max(finite)
+    span = max(high - low, 0.1, 0.1 * max(abs(low), abs(high)))
+    middle = (low + high) / 2
+    pad = span * 0.55
+    return round(middle - pad, 6), round(middle + pad, 6)
 
 
 def plot_label_distribution(

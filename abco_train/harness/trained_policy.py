@@ -115,7 +115,7 @@ def load_policy(run_dir: str | os.PathLike[str], *, device: str = "cpu", quiet: 
     except (ConfigError, TypeError, ValueError) as exc:
         raise RunFolderError(f"{config} holds no config abco can read: {exc}") from None
     cfg = cfg.replace(run_dir=str(run_dir), quiet=quiet, device=resolve_device(device))
-    state = load_checkpoint(checkpoint, cfg.device)
+    state = load_checkpoint(checkpoint)
     if state is None:
         raise RunFolderError(f"{checkpoint} vanished while it was read")
     if identity(state["config"]) != identity(asdict(cfg)):

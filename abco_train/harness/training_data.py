@@ -15,6 +15,7 @@ the file's frames either way.
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,11 +26,12 @@ from gymnasium import spaces
 import abco_data
 import abco_envs
 from abco_data.arrays import MazeFrames
+from abco_data.errors import DatasetFileNotFoundError
 from abco_data.format import LazyH5File
 from abco_train.config.run import ConfigError, RunConfig
 
-__all__ = ["TrainingData", "resolve_dataset", "load_training_data", "distinct_layouts",
-           "KINDS", "TRAIN_EVAL_LAYOUTS"]  # fmt: skip
+__all__ = ["TrainingData", "resolve_dataset", "looks_like_path", "check_dataset_paths",
+           "load_training_data", "distinct_layouts", "KINDS", "TRAIN_EVAL_LAYOUTS"]  # fmt: skip
 
 #: Dataset kinds of a run, by the role they play.
 KINDS = {"expert": "expert", "pre": "pre_demonstrations"}
@@ -37,6 +39,36 @@ KINDS = {"expert": "expert", "pre": "pre_demonstrations"}
 #: ``train`` evaluation, whose rollouts are also ABCO's post-demonstrations) on the first
 #: ``min(K, TRAIN_EVAL_LAYOUTS)`` of them: as many as the pool's train split has.
 TRAIN_EVAL_LAYOUTS = 100
+
+
+#: File name endings of HDF5 datasets: a ``--expert-data``/``--pre-data`` value ending so is a
+#: path, never a dataset id.
+HDF5_SUFFIXES = (".hdf5", ".h5", ".hdf")
+
+
+def looks_like_path(ref: str) -> bool:
+    """Whether a dataset argument is a file path rather than a dataset id (``abco/NAME-v0``,
+    ``local/NAME-v0``): an HDF5 file name, a path from the root, home or the current
+    folder, or more than one folder deep.
+
+    Example:
+        >>> [looks_like_path(r) for r in ("data/nope.hdf5", "abco/maze5x5-expert-v0", "./x")]
+        [True, False, True]
+    """
+    return (ref.lower().endswith(HDF5_SUFFIXES) or ref.startswith(("/", "./", "../", "~"))
+            or ref.count("/") > 1 or os.sep in ref.replace("/", ""))
+
+
+def check_dataset_paths(config: RunConfig) -> None:
+    """Refuse a ``--expert-data``/``--pre-data`` path that names no file, before a run touches
+    its folder.
+
+    Raises:
+        DatasetFileNotFoundError: ``no such file: PATH``, naming the option.
+    """
+    for flag, ref in (("--expert-data", config.expert_data), ("--pre-data", config.pre_data)):
+        if ref is not None and looks_like_path(ref) and not Path(ref).is_file():
+            raise DatasetFileNotFoundError(f"{flag}: no such file: {ref}")
 
 
 def resolve_dataset(
@@ -64,6 +96,8 @@ def resolve_dataset(
         abco_data.DatasetError: The file or id is unusable (missing, damaged, another kind or
             environment, a checksum mismatch, non-finite values); the message names it.
     """
+    if ref is not None and looks_like_path(ref) and not Path(ref).is_file():
+        raise DatasetFileNotFoundError(f"no such file: {ref}")
     if ref is not None and (Path(ref).is_file() or abco_data.is_user_id(ref)):
         # A file given by hand, or a user dataset's (its bytes checked against the user
         # manifest first), is checked like one from the cache, before any training: its kind,

@@ -19,7 +19,7 @@ from abco_train.methods.base import Method
 
 __all__ = ["register", "get_method", "available", "load_plugins", "resolve_config",
            "PluginError", "BUILTIN_MODULES", "config_from_record", "identity",
-           "builtin_options", "options_class"]  # fmt: skip
+           "builtin_options", "method_names", "options_class"]  # fmt: skip
 
 #: Modules whose import registers the built-in methods (imported on first lookup).
 BUILTIN_MODULES = (
@@ -73,6 +73,12 @@ def available() -> tuple[str, ...]:
     """Registered method names."""
     _builtins()
     return tuple(_REGISTRY)
+
+
+def method_names() -> tuple[str, ...]:
+    """Every method name a run may give: the built-in ones (read without importing torch)
+    and those registered so far (plugins loaded)."""
+    return tuple(dict.fromkeys([*builtin_options(), *_REGISTRY]))
 
 
 def builtin_options() -> dict[str, type[MethodOptions]]:

@@ -264,11 +264,12 @@ def _paper_track(runs: list[Run], skipped: list[Skipped], out: Path, labels_env:
     if not grid.runs:  # procedural-data runs only: the generalisation section
         md = [*head, *_intro(every, skipped), "", "## Generalisation", "", *gen_lines]
         return md, plots, None
+    envs = [e for e in TABLE1_ENVS if any(grid.has(e, m) for m in grid.main_methods)]
     agg_lines, agg_rows, profile_png = aggregate.section(
-        grid.scores(grid.main_methods, TABLE1_ENVS), TABLE1_ENVS, baseline, out, label,
+        grid.scores(grid.main_methods, envs), envs, baseline, out, label,
         evaluation="train/paper (mazes), episodes")  # fmt: skip
     md = [*head, *_intro(grid, skipped),
-          *_paper_sections(grid, wall, agg_lines, gen_lines, label, csv_rows)]
+          *_paper_sections(grid, wall, agg_lines, gen_lines, label, csv_rows, len(envs))]
     csv_rows += agg_rows  # the aggregates' rows last
     return md, _paper_plots(grid, out, labels_env) + plots, profile_png
 
@@ -341,9 +342,10 @@ def _baseline(baseline: str | None, grid: Grid, runs_dir: Path) -> str:
 
 def _paper_sections(grid: Grid, wall: float | None, agg_lines: list[str],
                     gen_lines: list[str], label: dict[str, str],
-                    csv_rows: list[dict[str, Any]]) -> list[str]:  # fmt: skip
+                    csv_rows: list[dict[str, Any]], n_envs: int) -> list[str]:  # fmt: skip
     """The sections of a grid with standard-data runs, from the goals to the reference
-    returns: the paper's tables re-measured, the aggregates (``agg_lines``), the
+    returns: the paper's tables re-measured, the aggregates (``agg_lines``, over ``n_envs``
+    environments), the
     generalisation section (``gen_lines``), what is missing. Their CSV rows are appended."""
     main = grid.main_methods
     t1 = [(e, m, label[m], published(m, e)) for e in TABLE1_ENVS for m in main
@@ -360,7 +362,8 @@ def _paper_sections(grid: Grid, wall: float | None, agg_lines: list[str],
         "", "## Goals (mean over seeds)", "", *tables.goals(grid, wall),
         "", "## Table 1 re-measured: every method, train split (the paper's protocol)", "",
         *(tables.table(grid, t1, "train", csv_rows, "table1", counts=True) if t1 else empty),
-        "", f"## Aggregates across the {len(TABLE1_ENVS)} environments (rliable)", "",
+        "", f"## Aggregates across the {n_envs} environment{'s' * (n_envs != 1)} of Table 1"
+        " in this grid (rliable)", "",
         *agg_lines, "", "## Which environments separate methods", "",
         *aggregate.separation(means, TABLE1_ENVS, label),
         "", "## Table 1, mazes on the held-out test split", "",

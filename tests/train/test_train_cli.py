@@ -175,6 +175,7 @@ def test_cuda_without_a_gpu_is_refused(tmp_path, capsys) -> None:
     assert code == 2 and "sees no CUDA device" in capsys.readouterr().err
 
 
+@pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 @pytest.mark.parametrize("env", ["CartPole-v1", "AbcoMaze3x3-v0"])
 def test_cuda_run_resumes_and_loads_on_cpu(tiny_data, tmp_path, env) -> None:

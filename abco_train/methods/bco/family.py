@@ -309,6 +309,9 @@ class BCOFamily(Method):
         labels = torch.cat([self.pre_actions[self.s_pre], self.pos_actions[self.s_pos]])
 
         def pairs(idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            if n_pre == len(labels):  # I_s from I_pre alone: one gather per frame
+                rows = self.pre_t[self.s_pre[idx]]
+                return self.pre_obs[rows], self.pre_obs[rows + 1]
             is_pre = idx < n_pre
             s = torch.empty((len(idx), *self.pre_obs.shape[1:]), dtype=self.pre_obs.dtype)
             s1 = torch.empty_like(s)

@@ -69,16 +69,19 @@ def fit(
     from abco_data.progress import is_terminal
 
     net.train()
-    n, loss_sum, seen = len(labels), 0.0, 0
+    n, seen = len(labels), 0
     batches = -(-n // batch_size)
     total = epochs * batches if max_batches is None else min(epochs * batches, max_batches)
     # minibatch bars only on a terminal: in a log they would repeat for every epoch
     bar = tqdm(total=total, desc=desc, leave=False, disable=quiet or not is_terminal(sys.stderr),
                unit="batch")  # fmt: skip
     done = 0  # not bar.n: a disabled bar counts nothing
+    # The loss is summed where it is computed (in float64, as Python floats would be): no
+    # host synchronisation per minibatch on a GPU, one per epoch.
+    total_loss = torch.zeros((), dtype=torch.float64, device=device)
     for _ in range(epochs):
         order = torch.from_numpy(rng.permutation(n))
-        loss_sum, seen = 0.0, 0
+        total_loss, seen = torch.zeros((), dtype=torch.float64, device=device), 0
         for start in range(0, n, batch_size):
             if done >= total:
                 break
@@ -93,9 +96,9 @@ def fit(
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
-            loss_sum, seen = loss_sum + loss.item() * len(idx), seen + len(idx)
+            total_loss, seen = total_loss + loss.detach().double() * len(idx), seen + len(idx)
     bar.close()
-    return loss_sum / max(seen, 1)
+    return float(total_loss) / max(seen, 1)
 
 
 @torch.no_grad()
