@@ -19,7 +19,6 @@ Example:
     'abco/cartpole-pre-v0'
 """
 
-from abco_data.arrays import DatasetArrays, Episode
 from abco_data.dataset import Dataset, open_dataset
 from abco_data.errors import (
     ChecksumError,
@@ -36,22 +35,23 @@ from abco_data.errors import (
     UnknownDatasetError,
     WrongKindError,
 )
-from abco_data.files import sha256_of
 from abco_data.format import FORMAT_NAME, FORMAT_VERSION
-from abco_data.generate import GENERATOR_VERSION, generate
-from abco_data.hub import download, load
-from abco_data.manifest import data_home
-from abco_data.minari_import import import_minari
-from abco_data.publish import push
-from abco_data.record import record
-from abco_data.reference import (
+from abco_data.format.arrays import DatasetArrays, Episode
+from abco_data.format.files import sha256_of
+from abco_data.generation.generate import GENERATOR_VERSION, generate
+from abco_data.generation.reference import (
     ReferenceReturns,
     fresh_reference,
     layout_reference,
     protocol_reference,
 )
+from abco_data.hub.fetch import download, load
+from abco_data.hub.manifest import data_home
+from abco_data.hub.publish import push
+from abco_data.interop.minari_import import import_minari
 from abco_data.registry import DATASET_IDS, DatasetSpec, dataset_id, spec
-from abco_data.user_ids import is_user_id
+from abco_data.user.ids import is_user_id
+from abco_data.user.record import record
 from abco_data.verify import VerifyReport, check_dataset, verify
 
 __version__ = "0.1.0"

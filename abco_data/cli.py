@@ -1,5 +1,5 @@
 """Command line of the dataset layer: ``abco data list|info|generate|download|verify|push``,
-and for the user's own datasets ``record`` and ``import-minari`` (:mod:`abco_data.cli_user`).
+and for the user's own datasets ``record`` and ``import-minari`` (:mod:`abco_data.user.cli`).
 
 ``abco_train``'s ``abco`` script mounts these with :func:`add_subcommands`; ``python -m
 abco_data`` runs them on their own through :func:`main`. Every action parser sets
@@ -33,7 +33,6 @@ from typing import Any
 
 from gymnasium.error import DependencyNotInstalled
 
-from abco_data.cli_user import add_user_actions, print_user_info, user_list_rows
 from abco_data.errors import (
     DatasetError,
     DatasetReadError,
@@ -42,7 +41,8 @@ from abco_data.errors import (
     UnknownDatasetError,
     WrongKindError,
 )
-from abco_data.user_ids import is_user_id
+from abco_data.user.cli import add_user_actions, print_user_info, user_list_rows
+from abco_data.user.ids import is_user_id
 
 __all__ = ["add_subcommands", "main", "build_parser", "run", "EXIT_FAILED", "EXIT_BAD_INPUT",
            "EXIT_BROKEN_PIPE", "UsageError"]
@@ -63,7 +63,7 @@ class UsageError(DatasetError):
 
 def _manifest() -> Any:
     try:
-        from abco_data.manifest import read_manifest
+        from abco_data.hub.manifest import read_manifest
 
         return read_manifest()
     except (DatasetError, ImportError):
@@ -83,7 +83,7 @@ def _source(manifest: Any, dataset_id: str) -> str:
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
-    from abco_data.manifest import data_home
+    from abco_data.hub.manifest import data_home
     from abco_data.registry import DATASET_IDS, spec
 
     home = Path(args.cache_dir) if args.cache_dir else data_home()
@@ -105,7 +105,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 def _cmd_info(args: argparse.Namespace) -> int:
     from abco_data.dataset import open_dataset
-    from abco_data.manifest import data_home
+    from abco_data.hub.manifest import data_home
     from abco_data.registry import spec
 
     if args.layouts is not None and args.layouts < 1:  # checked even where nothing is cached
@@ -176,8 +176,8 @@ def _parse_overrides(dataset_id: str, items: Sequence[str], out_path: str | None
 
 
 def _cmd_generate(args: argparse.Namespace) -> int:
-    from abco_data.files import sha256_of
-    from abco_data.generate import generate
+    from abco_data.format.files import sha256_of
+    from abco_data.generation.generate import generate
 
     overrides = _parse_overrides(args.id, args.set, args.out)
     start = time.perf_counter()
@@ -189,7 +189,7 @@ def _cmd_generate(args: argparse.Namespace) -> int:
 
 
 def _cmd_download(args: argparse.Namespace) -> int:
-    from abco_data.hub import download
+    from abco_data.hub.fetch import download
 
     path = download(args.id, cache_dir=args.cache_dir, revision=args.revision,
                     progress=not args.quiet)
@@ -211,7 +211,7 @@ def _cmd_verify(args: argparse.Namespace) -> int:
 
 
 def _cmd_push(args: argparse.Namespace) -> int:
-    from abco_data.publish import push
+    from abco_data.hub.publish import push
 
     commit = push(args.id, args.repo, path=args.path, revision=args.revision)
     print(f"pushed {args.id} to {args.repo} at {commit}")

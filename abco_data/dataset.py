@@ -1,6 +1,6 @@
 """Reading abco datasets: :func:`open_dataset` and :class:`Dataset`, whose readers return the
-in-memory records of :mod:`abco_data.arrays` (:class:`~abco_data.arrays.Episode`,
-:class:`~abco_data.arrays.DatasetArrays`).
+in-memory records of :mod:`abco_data.format.arrays` (:class:`~abco_data.format.arrays.Episode`,
+:class:`~abco_data.format.arrays.DatasetArrays`).
 
 A transition ``k`` pairs observation rows ``obs_t[k]`` and ``obs_t[k] + 1`` of the flat
 ``observations`` column; both always lie in the same episode (each episode stores its ``T + 1``
@@ -25,7 +25,7 @@ import h5py
 import numpy as np
 from gymnasium import spaces
 
-from abco_data.arrays import DatasetArrays, Episode
+from abco_data.checks.header import read_header, read_whole_column
 from abco_data.errors import CorruptDatasetError, WrongKindError
 from abco_data.format import (
     ACTIONS,
@@ -45,10 +45,10 @@ from abco_data.format import (
     hdf5_errors,
     open_h5,
 )
-from abco_data.header import read_header, read_whole_column
-from abco_data.reference import ReferenceReturns
+from abco_data.format.arrays import DatasetArrays, Episode
+from abco_data.format.validation import check_values
+from abco_data.generation.reference import ReferenceReturns
 from abco_data.registry import check_layout_count
-from abco_data.validation import check_values
 
 if TYPE_CHECKING:  # imported when called: ``import abco_data`` does not import torch
     from abco_data.torch_view import TransitionDataset

@@ -29,8 +29,8 @@ from typing import Any
 import numpy as np
 
 import abco_envs
-from abco_data.bounds import check_params
 from abco_data.errors import UnknownDatasetError
+from abco_data.generation.bounds import check_params
 from abco_envs.maze.procedural import PROCEDURAL_SPLIT_SIZE
 
 __all__ = ["DatasetSpec", "DATASET_IDS", "ENV_NAMES", "ACTION_COUNTS", "PROCEDURAL_ENVS",
@@ -142,7 +142,7 @@ class DatasetSpec:
 
     def with_overrides(self, **overrides: Any) -> DatasetSpec:
         """A copy whose parameters are updated by ``overrides`` (only known keys), each
-        checked against its bounds (:mod:`abco_data.bounds`) before anything is made.
+        checked against its bounds (:mod:`abco_data.generation.bounds`) before anything is made.
 
         Raises:
             TypeError: An override that this dataset has no parameter for, or one of

@@ -15,7 +15,7 @@ Two modes:
 
 :func:`frames_tensor` gives a trainer's observation column as something it indexes with
 tensors of rows: a tensor sharing an array's memory, or a :class:`FrameTensor` that draws
-:class:`~abco_data.arrays.MazeFrames` a batch at a time.
+:class:`~abco_data.format.arrays.MazeFrames` a batch at a time.
 
 Example:
     >>> import tempfile, os, torch, abco_data
@@ -37,9 +37,9 @@ import torch
 from gymnasium import spaces
 from torch.utils.data import Dataset as TorchDataset
 
-from abco_data.arrays import DatasetArrays, MazeFrames
 from abco_data.format import ACTIONS, FileIdentity, LazyH5File, ObservationReader
-from abco_data.validation import check_observations
+from abco_data.format.arrays import DatasetArrays, MazeFrames
+from abco_data.format.validation import check_observations
 
 __all__ = ["TransitionDataset", "TransitionSource", "FrameTensor", "frames_tensor"]
 
@@ -144,7 +144,7 @@ class TransitionDataset(TorchDataset):
 
 
 class FrameTensor:
-    """:class:`~abco_data.arrays.MazeFrames` indexed like a ``uint8`` tensor of its frames.
+    """:class:`~abco_data.format.arrays.MazeFrames` indexed like a ``uint8`` tensor of its frames.
 
     ``view[rows]`` (rows: a CPU integer tensor, an array or an int) is the tensor that
     ``torch.from_numpy(np.asarray(frames))[rows]`` would give, drawn for those rows only.
@@ -185,7 +185,7 @@ class FrameTensor:
 
 def frames_tensor(observations: np.ndarray | MazeFrames) -> torch.Tensor | FrameTensor:
     """An observation column for indexing with tensors of rows: an array's tensor (sharing
-    its memory) or, for :class:`~abco_data.arrays.MazeFrames`, a :class:`FrameTensor`."""
+    its memory) or, for :class:`~abco_data.format.arrays.MazeFrames`, a :class:`FrameTensor`."""
     if isinstance(observations, MazeFrames):
         return FrameTensor(observations)
     return torch.from_numpy(observations)

@@ -2,7 +2,7 @@
 
 :func:`check_dataset` is what a program calls before trusting a file given by path as it
 would trust one from the cache: it opens the file (format version, kind, environment), checks
-its size and sha256 (see :mod:`abco_data.checksum`: the manifest's, or the bytes abco
+its size and sha256 (see :mod:`abco_data.checks.checksum`: the manifest's, or the bytes abco
 generates for what the file claims to be), then reads every value: finite numbers, actions in
 the action space, episodes that end where they should, observations inside the observation
 space, and for mazes each move consistent with the walls and every frame re-rendered from its
@@ -22,17 +22,17 @@ from typing import TypeVar
 
 import numpy as np
 
-from abco_data.arrays import DatasetArrays
-from abco_data.checksum import ExpectedDigest, check_checksum, expected_digest
+from abco_data.checks.checksum import ExpectedDigest, check_checksum, expected_digest
 from abco_data.dataset import Dataset, open_dataset
 from abco_data.errors import ChecksumError, CorruptDatasetError, WrongKindError
-from abco_data.files import file_digest, sha256_of
-from abco_data.forked_call import run_in_child
-from abco_data.generate import layout_split
-from abco_data.manifest import Manifest, as_manifest, cached_path, known_ids
-from abco_data.user_datasets import user_dataset_file
-from abco_data.user_ids import is_user_id
-from abco_data.validation import MazeColumns, maze_columns
+from abco_data.format.arrays import DatasetArrays
+from abco_data.format.files import file_digest, sha256_of
+from abco_data.format.validation import MazeColumns, maze_columns
+from abco_data.generation.generate import layout_split
+from abco_data.hub.manifest import Manifest, as_manifest, cached_path, known_ids
+from abco_data.user.datasets import user_dataset_file
+from abco_data.user.forked_call import run_in_child
+from abco_data.user.ids import is_user_id
 from abco_envs.maze.procedural import PROCEDURAL_SPLIT_SIZE
 
 __all__ = ["VerifyReport", "check_dataset", "verify", "sha256_of"]
@@ -127,7 +127,7 @@ def _check_maze(a: DatasetArrays, m: MazeColumns, ds: Dataset, path: Path) -> in
 
 def _check_values(ds: Dataset) -> int:
     """Every value of ``ds`` (see the module docstring); returns the frames re-rendered."""
-    a = ds.load_arrays()  # finite values, spaces, episode ends: abco_data.validation
+    a = ds.load_arrays()  # finite values, spaces, episode ends: abco_data.format.validation
     maze = maze_columns(a, ds.path)
     return _check_maze(a, maze, ds, ds.path) if maze is not None else 0
 
@@ -238,7 +238,7 @@ def verify(source: str | os.PathLike[str], *, sha256: str | None = None,
     Args:
         source: The file, or a dataset id (the abco cache's copy, or the file of a
             registered user dataset).
-        sha256: Expected hex sha256; default what :mod:`abco_data.checksum` knows for the
+        sha256: Expected hex sha256; default what :mod:`abco_data.checks.checksum` knows for the
             dataset the file claims to be (the manifest's entry, or the generator's bytes).
         size: Expected size in bytes (with the same default).
         manifest: A manifest or the path of one; default the shipped one.

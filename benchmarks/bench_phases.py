@@ -115,7 +115,8 @@ WRAPPED: list[tuple[str, str, Any]] = [
     ("abco_train.harness.loop", "write_atomic", "records"),
     ("abco_data", "protocol_reference", "references"),
     ("abco_data", "layout_reference", "references"),
-    ("abco_data.reference", "classic_reference", "references"),
+    ("abco_data.reference", "classic_reference", "references"),  # before abco_data's rooms
+    ("abco_data.generation.reference", "classic_reference", "references"),
     ("abco_train.harness.evaluation", "fresh_set", "references"),
     ("abco_train.methods.bco.family", "BCOFamily._train_idm", "idm"),
     ("abco_train.methods.bco.family", "BCOFamily.validate_idm", "idm"),

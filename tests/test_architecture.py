@@ -161,3 +161,33 @@ def test_the_trainer_shows_its_rooms() -> None:
     rooms = sorted(p.parent.name for p in (ROOT / "abco_train").glob("*/__init__.py"))
     assert len(top) <= MAX_TOP_LEVEL_MODULES, top
     assert rooms == ["bench", "config", "harness", "methods", "networks", "report"]
+
+
+#: abco_data's rooms, and the most modules beside them at its top level (the dataset API,
+#: its registry, errors, command line, progress, torch view and verification).
+DATA_ROOMS = ["checks", "format", "generation", "hub", "interop", "user"]
+MAX_DATA_TOP_LEVEL_MODULES = 10
+
+
+def test_the_datasets_package_shows_its_rooms() -> None:
+    top = sorted(p.name for p in (ROOT / "abco_data").glob("*.py"))
+    rooms = sorted(p.parent.name for p in (ROOT / "abco_data").glob("*/__init__.py"))
+    assert len(top) <= MAX_DATA_TOP_LEVEL_MODULES, top
+    assert rooms == DATA_ROOMS
+
+
+def test_the_file_format_stands_on_its_own() -> None:
+    """``abco_data.format`` reads and writes files: it knows no registry, Hub or user data
+    (it may draw maze frames with ``abco_envs``, the layer below)."""
+    outside = [f"{m} -> {t}" for m, targets in DEPENDS.items() if m.startswith("abco_data.format")
+               for t in targets if t.startswith("abco_data") and not t.startswith(
+                   ("abco_data.format", "abco_data.errors"))]  # fmt: skip
+    assert outside == []
+
+
+def test_minari_is_reached_through_the_command_line_and_the_api_only() -> None:
+    """The optional extra's code (``abco_data.interop``) is imported by the package's API and
+    command lines only, so nothing else needs Minari installed."""
+    users = sorted(m for m, targets in DEPENDS.items() if not m.startswith("abco_data.interop")
+                   and any(t.startswith("abco_data.interop") for t in targets))  # fmt: skip
+    assert set(users) <= {"abco_data", "abco_data.cli", "abco_data.user.cli"}, users

@@ -9,7 +9,7 @@ This package is the only place that knows the layout described in ``docs/format.
 - :mod:`abco_data.format.handle`: :class:`LazyH5File`, pinned to one file (:class:`FileIdentity`);
 - :mod:`abco_data.format.reader`: :func:`open_h5` and
   :class:`ObservationReader`, which decodes palette-encoded observations
-  (:mod:`abco_data.palette`), with HDF5's errors turned into ones naming the file;
+  (:mod:`abco_data.format.palette`), with HDF5's errors turned into ones naming the file;
 - :mod:`abco_data.format.heaps`: the check that keeps HDF5 from looping forever on a damaged
   global heap (run before every open).
 

@@ -24,8 +24,8 @@ import numpy as np
 
 from abco_data.errors import CorruptDatasetError, DatasetFileNotFoundError, DatasetReadError
 from abco_data.format.heaps import check_global_heaps
+from abco_data.format.palette import MAX_COLOURS, PaletteDecoder
 from abco_data.format.schema import OBSERVATION_ENCODINGS, OBSERVATIONS, PALETTE, attr_value
-from abco_data.palette import MAX_COLOURS, PaletteDecoder
 
 __all__ = ["HDF5_ERRORS", "open_h5", "open_h5_file", "hdf5_errors", "h5_column",
            "read_column", "read_rows", "ObservationReader"]

@@ -2,7 +2,7 @@
 
 Columns are created on first append and grow in whole chunks, so a column's bytes depend only
 on its contents. RGB ``uint8`` observations are stored palette-encoded while their frames
-allow it (see :mod:`abco_data.palette`).
+allow it (see :mod:`abco_data.format.palette`).
 """
 
 from __future__ import annotations
@@ -16,7 +16,15 @@ import h5py
 import numpy as np
 
 from abco_data.errors import DatasetWriteError
-from abco_data.files import atomic_target, check_target
+from abco_data.format.files import atomic_target, check_target
+from abco_data.format.palette import (
+    MAX_COLOURS_4BIT,
+    PaletteDecoder,
+    PaletteEncoder,
+    is_palette_candidate,
+    pack4,
+    unpack4,
+)
 from abco_data.format.schema import (
     GZIP_LEVEL,
     IMAGE_GZIP_LEVEL,
@@ -28,14 +36,6 @@ from abco_data.format.schema import (
     chunk_rows,
     episode_column,
 )
-from abco_data.palette import (
-    MAX_COLOURS_4BIT,
-    PaletteDecoder,
-    PaletteEncoder,
-    is_palette_candidate,
-    pack4,
-    unpack4,
-)
 
 __all__ = ["DatasetWriter"]
 
@@ -44,7 +44,7 @@ class _Column:
     """A resizable, chunked, gzip-compressed dataset written a whole chunk at a time.
 
     With ``palette`` (RGB ``uint8`` frames), rows are stored as palette indices (see
-    :mod:`abco_data.palette`): packed two per byte (``palette4``) while the frames have at
+    :mod:`abco_data.format.palette`): packed two per byte (``palette4``) while the frames have at
     most 16 colours and an even width, one per byte (``palette``) up to 256 colours, raw
     beyond; on a change the rows already written are rewritten in the new encoding.
     """

@@ -160,9 +160,10 @@ class RunConfig:
                          "abco")
     seed: int = option("seed of everything (same seed, same CPU run)", 0, min=0,
                      max=MAX_SEED)
-    preset: str = option("cpu (compact CNN on images), paper (the paper's ResNet-18) or general "
-                         "(mazes: a network that reasons over the whole maze, for unseen layouts)",
-                         "cpu", choices=PRESETS)  # fmt: skip
+    preset: str = option("cpu (compact CNN on images), paper (the paper's ResNet-18: hours on "
+                         "a 2-core CPU, minutes on a GPU) or general (mazes: a network that "
+                         "reasons over the whole maze, for unseen layouts)", "cpu",
+                         choices=PRESETS)  # fmt: skip
     regime: str = option("default (abco's data and schedule) or authors (the authors': start-cell "
                          "pre-demonstrations without wall hits, one IDM and one policy epoch per "
                          "iteration, alpha 10)", "default", choices=REGIMES)
@@ -200,8 +201,9 @@ class RunConfig:
     cache_dir: str | None = option("abco dataset cache (default $ABCO_DATA_HOME)")
     run_dir: str | None = option("run folder (default runs/{env}-{method}-s{seed}, with the "
                                  "preset and regime where they are not the defaults)")
-    device: str = option("where the networks train and act: auto (cuda if available), cpu or "
-                         "cuda", "auto", choices=DEVICES)
+    device: str = option("where the networks train and act: auto (cuda if available, but the "
+                         "cpu for vector observations, where a GPU does not pay), cpu or cuda",
+                         "auto", choices=DEVICES)
     threads: int = option("torch threads; 1 stays fast when other processes share the cores "
                           "(more threads spin-wait on each other under load)", 1, min=1,
                          max=MAX_THREADS)

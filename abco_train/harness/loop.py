@@ -85,7 +85,7 @@ def train(config: RunConfig, *, stop_after: int | None = None) -> dict[str, Any]
             folder); what was written before stays as it was.
     """
     cfg = resolve_config(config)
-    cfg = cfg.replace(device=resolve_device(cfg.device))
+    cfg = cfg.replace(device=resolve_device(cfg.device, cfg.arch))
     run_dir = Path(cfg.run_dir or ".")
     check_run_dir(run_dir)
     stored = finished_result(run_dir, asdict(cfg))  # read only: a read-only folder answers

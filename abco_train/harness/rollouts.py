@@ -33,7 +33,7 @@ import gymnasium as gym
 import numpy as np
 
 import abco_envs
-from abco_data.reference import PAPER_FAIL_RETURN, PAPER_MAX_VISITS
+from abco_data.generation.reference import PAPER_FAIL_RETURN, PAPER_MAX_VISITS
 from abco_train.config.run import PROTOCOLS, env_kind
 from abco_train.harness.metrics import performance, summarize
 

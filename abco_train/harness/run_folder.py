@@ -13,7 +13,7 @@ A run folder holds::
                        (:mod:`abco_train.harness.run_lock`)
 
 Files are written whole or not at all (:func:`write_atomic`, on
-:func:`abco_data.files.atomic_target`): a killed run, a full disk or a read-only folder never
+:func:`abco_data.format.files.atomic_target`): a killed run, a full disk or a read-only folder never
 leaves a half-written ``final.json``, checkpoint or plot, and the temporaries of killed runs are
 removed on the next write. Only a regular file (or a new path) is ever replaced: a run folder
 that is not a folder, or a device, a FIFO or a link where one of its files goes, is refused
@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from abco_data.errors import InvalidTargetError
-from abco_data.files import atomic_target, check_target, file_kind
+from abco_data.format.files import atomic_target, check_target, file_kind
 from abco_train.methods.registry import identity
 
 __all__ = ["CONFIG", "METRICS", "CHECKPOINT", "FINAL", "OUTPUTS", "MAX_JSON_BYTES",

@@ -49,6 +49,6 @@ def score_reference(cfg: RunConfig, data: TrainingData, protocol: str,
         return abco_data.protocol_reference(cells, protocol, cfg.eval_max_steps)
     if cfg.eval_max_steps is None:
         return data.reference
-    from abco_data.reference import classic_reference
+    from abco_data.generation.reference import classic_reference
 
     return classic_reference(cfg.env, max_steps=cfg.eval_max_steps)

@@ -4,7 +4,7 @@
 file, a dataset id, or nothing for the env's own dataset) into an open
 :class:`abco_data.Dataset`; the trainer and ``abco bench`` both use it.
 :class:`TrainingData` is what a :class:`~abco_train.methods.base.Method` receives: numpy arrays,
-no torch. A maze's RGB frames stay what draws them (:class:`abco_data.arrays.MazeFrames`: one
+no torch. A maze's RGB frames stay what draws them (:class:`abco_data.format.arrays.MazeFrames`: one
 background per layout, the agent's cell per frame), drawn a minibatch at a time, so memory
 grows with the episodes and not with their frames (12 KiB each at 64x64, gigabytes for the
 first 10,000 procedural layouts). Every frame drawn is checked once against the file's own,
@@ -25,9 +25,9 @@ from gymnasium import spaces
 
 import abco_data
 import abco_envs
-from abco_data.arrays import MazeFrames
 from abco_data.errors import DatasetFileNotFoundError
 from abco_data.format import LazyH5File
+from abco_data.format.arrays import MazeFrames
 from abco_train.config.run import ConfigError, RunConfig
 
 __all__ = ["TrainingData", "resolve_dataset", "looks_like_path", "check_dataset_paths",
@@ -104,7 +104,7 @@ def resolve_dataset(
         # environment, format version, checksum (when its id is known) and values.
         if Path(ref).is_file():
             return abco_data.check_dataset(ref, kind=kind, env_id=env_id)
-        from abco_data.user_datasets import user_dataset_file
+        from abco_data.user.datasets import user_dataset_file
 
         return abco_data.check_dataset(user_dataset_file(ref, cache_dir), kind=kind,
                                        env_id=env_id, dataset_id=ref)  # fmt: skip
@@ -133,7 +133,7 @@ class TrainingData:
         n_actions: Size of the discrete action space.
         reference: Expert and random reference returns (per layout for mazes).
         pre_obs: Pre-demonstration observations, every episode's ``T + 1`` rows: an array, or
-            for maze frames :class:`~abco_data.arrays.MazeFrames` (index it with rows:
+            for maze frames :class:`~abco_data.format.arrays.MazeFrames` (index it with rows:
             ``pre_obs[rows]`` is an array; methods index it with tensors through
             :func:`abco_data.torch_view.frames_tensor`).
         pre_t: Row of ``s_t`` of each pre-demonstration transition (``s_t+1`` is the next).

@@ -13,7 +13,7 @@ about 0 and ``expert`` about 1 on every task.
   dataset generator does); other envs, their controller on the observation. A dataset of the
   user's own (:func:`abco_data.record`) names the policy that recorded it (its creation
   parameters' ``policy``, a ``MODULE:CALLABLE`` or a model ``.zip``): that policy, reloaded
-  by :func:`abco_data.policies.load_policy`, one observation at a time. An env without an
+  by :func:`abco_data.user.policies.load_policy`, one observation at a time. An env without an
   expert of abco's whose dataset names no policy it can reload (an imported Minari dataset)
   has no ``expert`` row: the method refuses in one line.
 
@@ -106,8 +106,8 @@ def _recorded_policy(cfg: Any) -> Any:
     from gymnasium import spaces
 
     from abco_data.errors import DatasetError
-    from abco_data.policies import checked_policy, load_policy
-    from abco_data.record import GENERATOR
+    from abco_data.user.policies import checked_policy, load_policy
+    from abco_data.user.record import GENERATOR
     from abco_train.config.envs import is_builtin_env
     from abco_train.config.fields import ConfigError
     from abco_train.harness.training_data import KINDS, resolve_dataset

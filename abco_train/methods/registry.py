@@ -12,7 +12,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, fields
 from typing import Any, TypeVar
 
-from abco_data.user_code import import_user_module, names_a_file
+from abco_data.user.code import import_user_module, names_a_file
 from abco_train.config.fields import MethodOptions
 from abco_train.config.run import MOVED_TO_METHOD_OPTIONS, ConfigError, RunConfig, comparable
 from abco_train.methods.base import Method

@@ -35,7 +35,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from abco_data.files import check_target, remove_path, remove_stale_temporaries, temporary_name
+from abco_data.format import files as file_ops
 from abco_train.bench.records import RecordError, Skipped, check_config, escape, read_json
 from abco_train.harness.run_folder import CONFIG, write_atomic
 from abco_train.methods.base import INTERACTION_KINDS
@@ -168,7 +168,7 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
         raise ReportError(f"unknown --labels-env {escape(labels_env, 80)!r}: not an env of"
                           f" {escape(runs_dir)}; envs found: {', '.join(found)}")  # fmt: skip
     out = _out_folder(runs_dir, out)
-    stage = temporary_name(out / STAGING, "staging")  # every file first here, then moved
+    stage = file_ops.temporary_name(out / STAGING, "staging")  # every file first here, then moved
     stage.mkdir()
     try:
         md, csv_rows, files = _compose(runs_dir, runs, skipped, stage, labels_env, baseline,
@@ -176,7 +176,7 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
         _write(stage, md, csv_rows, files)
         return _publish(stage, out, files)
     finally:
-        remove_path(stage)
+        file_ops.remove_path(stage)
 
 
 def _compose(runs_dir: Path, runs: list[Run], skipped: list[Skipped], out: Path,
@@ -287,9 +287,9 @@ def _out_folder(runs_dir: Path, out: str | Path | None) -> Path:
     if out.exists() and not out.is_dir():
         raise ReportError(f"--out {escape(out)} is not a folder")
     out.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(out, STAGING)  # the staging folders of killed reports
+    file_ops.remove_stale_temporaries(out, STAGING)  # the staging folders of killed reports
     for name in ("report.md", "results.csv"):
-        check_target(out / name)
+        file_ops.check_target(out / name)
     return out
 
 
@@ -298,7 +298,7 @@ def _publish(stage: Path, out: Path, files: dict[str, Path]) -> dict[str, Path]:
     leaves the previous one as it was); the files by name, in ``out``."""
     names = sorted(p.name for p in stage.iterdir())
     for name in names:
-        check_target(out / name)
+        file_ops.check_target(out / name)
     for name in names:
         os.replace(stage / name, out / name)
     return {key: out / path.name for key, path in files.items()}
@@ -345,8 +345,8 @@ def _paper_sections(grid: Grid, wall: float | None, agg_lines: list[str],
                     csv_rows: list[dict[str, Any]], n_envs: int) -> list[str]:  # fmt: skip
     """The sections of a grid with standard-data runs, from the goals to the reference
     returns: the paper's tables re-measured, the aggregates (``agg_lines``, over ``n_envs``
-    environments), the
-    generalisation section (``gen_lines``), what is missing. Their CSV rows are appended."""
+    environments), the generalisation section (``gen_lines``), what is missing. Their CSV rows
+    are appended."""
     main = grid.main_methods
     t1 = [(e, m, label[m], published(m, e)) for e in TABLE1_ENVS for m in main
           if grid.has(e, m)]  # fmt: skip
@@ -362,8 +362,7 @@ def _paper_sections(grid: Grid, wall: float | None, agg_lines: list[str],
         "", "## Goals (mean over seeds)", "", *tables.goals(grid, wall),
         "", "## Table 1 re-measured: every method, train split (the paper's protocol)", "",
         *(tables.table(grid, t1, "train", csv_rows, "table1", counts=True) if t1 else empty),
-        "", f"## Aggregates across the {n_envs} environment{'s' * (n_envs != 1)} of Table 1"
-        " in this grid (rliable)", "",
+        "", f"## Aggregates: {n_envs} of the {len(TABLE1_ENVS)} environments of Table 1", "",
         *agg_lines, "", "## Which environments separate methods", "",
         *aggregate.separation(means, TABLE1_ENVS, label),
         "", "## Table 1, mazes on the held-out test split", "",

@@ -40,7 +40,7 @@ from data_testing import make_small  # noqa: E402
 
 import abco_data  # noqa: E402
 from abco_data.errors import DatasetError  # noqa: E402
-from abco_data.forked_call import run_in_child  # noqa: E402
+from abco_data.user.forked_call import run_in_child  # noqa: E402
 
 FAMILIES = ("flip", "truncate", "zero", "edit", "plausible")
 READERS = ("open", "load_arrays", "episodes", "torch", "check", "verify", "cli_verify")

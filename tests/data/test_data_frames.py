@@ -6,7 +6,7 @@ import pytest
 from data_testing import make_small
 
 import abco_data
-from abco_data.arrays import MazeFrames
+from abco_data.format.arrays import MazeFrames
 from abco_envs.maze.render import MazeRenderer
 
 torch = pytest.importorskip("torch")

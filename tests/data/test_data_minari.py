@@ -11,7 +11,7 @@ from data_testing import make_small
 import abco_data
 
 minari = pytest.importorskip("minari")
-from abco_data.minari_export import NO_ACTIONS, export_to_minari  # noqa: E402
+from abco_data.interop.minari_export import NO_ACTIONS, export_to_minari  # noqa: E402
 
 
 def _export(tmp_path, monkeypatch, dataset_id):
@@ -65,7 +65,7 @@ def test_maze_export_needs_no_prior_import_of_abco_envs(tmp_path):
     path = make_small("abco/maze3x3-pre-v0", tmp_path)
     code = (
         "import sys, minari\n"
-        "from abco_data.minari_export import export_to_minari\n"
+        "from abco_data.interop.minari_export import export_to_minari\n"
         f"export_to_minari({str(path)!r}, datasets_root={str(tmp_path / 'm')!r})\n"
         "import os; os.environ['MINARI_DATASETS_PATH'] = " + repr(str(tmp_path / "m")) + "\n"
         "print(minari.load_dataset('abco/maze3x3-pre-v0').total_steps)\n"

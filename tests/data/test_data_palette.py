@@ -10,7 +10,7 @@ from data_testing import make_small
 import abco_data
 from abco_data.errors import ChecksumError, CorruptDatasetError
 from abco_data.format import IMAGE_CHUNK_ROWS, DatasetWriter, ObservationReader
-from abco_data.palette import PaletteDecoder, PaletteEncoder, pack4, unpack4
+from abco_data.format.palette import PaletteDecoder, PaletteEncoder, pack4, unpack4
 
 
 def _frames(n, h=6, w=5, colours=5, seed=0):

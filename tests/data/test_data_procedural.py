@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 import abco_data
-from abco_data import cli, hub
+from abco_data import cli
 from abco_data.errors import WrongKindError
-from abco_data.generate import layout_split
+from abco_data.generation.generate import layout_split
+from abco_data.hub import fetch as hub
 from abco_envs.maze.layout import layout_hash, shortest_path_length
 from abco_envs.maze.pool import layout_pool
 from abco_envs.maze.procedural import procedural_ids

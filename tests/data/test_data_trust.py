@@ -16,15 +16,16 @@ import pytest
 from data_testing import make_small, small_overrides
 
 import abco_data
-from abco_data import cli, files, progress
-from abco_data.bounds import COUNT_BOUNDS, MAX_FRAME_BYTES, check_params
+from abco_data import cli, progress
 from abco_data.errors import (
     DatasetChangedError,
     DatasetReadError,
     InvalidParameterError,
     InvalidTargetError,
 )
-from abco_data.files import atomic_target, check_target, file_digest
+from abco_data.format import files
+from abco_data.format.files import atomic_target, check_target, file_digest
+from abco_data.generation.bounds import COUNT_BOUNDS, MAX_FRAME_BYTES, check_params
 
 PRE = "abco/maze3x3-pre-v0"
 
@@ -41,7 +42,7 @@ def no_generation(monkeypatch: pytest.MonkeyPatch) -> None:
     def forbidden(*args: object, **kwargs: object) -> None:
         raise AssertionError("generation started although its input was refused")
 
-    generation = sys.modules["abco_data.generate"]  # the package's name is the function's
+    generation = sys.modules["abco_data.generation.generate"]  # abco_data.generate: the function
     monkeypatch.setattr(generation, "reference_for", forbidden)
     monkeypatch.setattr(generation, "DatasetWriter", forbidden)
 

@@ -1,8 +1,8 @@
-"""Getting a dataset (abco_data.hub) against a local server speaking the Hub's file endpoints.
+"""Getting a dataset (abco_data.hub.fetch) against a local server speaking the Hub's file endpoints.
 
 Every test runs with a fresh :class:`hub_server.HubServer` on 127.0.0.1, a temporary
 huggingface_hub cache, ``ABCO_DATA_HOME`` (abco cache) and ``ABCO_DATA_MANIFEST`` (a manifest
-written for the test). ``abco_data.hub`` uses huggingface_hub's own settings, which
+written for the test). ``abco_data.hub.fetch`` uses huggingface_hub's own settings, which
 ``huggingface_hub.constants`` reads from ``HF_ENDPOINT``/``HF_HOME``/``HF_HUB_OFFLINE`` when it
 is imported: in this process the tests patch those constants (:func:`use_endpoint`,
 :func:`use_hf_cache`, :func:`go_offline`), and one test runs a subprocess with ``HF_ENDPOINT``
@@ -31,7 +31,7 @@ import pytest
 from hub_server import HubServer
 
 import abco_data
-from abco_data import cli, hub, progress, publish
+from abco_data import cli, progress
 from abco_data.errors import (
     ChecksumError,
     DatasetError,
@@ -40,6 +40,8 @@ from abco_data.errors import (
     InvalidTargetError,
     UnknownDatasetError,
 )
+from abco_data.hub import fetch as hub
+from abco_data.hub import publish
 from abco_data.progress import LogProgress
 
 REPO = "abco-datasets/abco"
@@ -293,7 +295,7 @@ def test_corrupted_file_on_the_hub_falls_back_to_generation(
     hub_env.server.set_file(REPO, hub_env.commit, FILENAME, b"x" * len(hub_env.data))
     calls: list[tuple[str, Path]] = []
     monkeypatch.setattr(hub, "generate", fake_generator(hub_env.data, calls))
-    with caplog.at_level(logging.WARNING, logger="abco_data.hub"):
+    with caplog.at_level(logging.WARNING, logger="abco_data.hub.fetch"):
         path = hub.fetch(DATASET, progress=False)
     assert [c[0] for c in calls] == [DATASET]
     assert path.read_bytes() == hub_env.data
@@ -317,7 +319,7 @@ def test_corrupted_cached_file_is_reported_and_replaced(
     else:
         path.unlink()
         path.write_bytes(bytes(bad))
-    with caplog.at_level(logging.WARNING, logger="abco_data.hub"):
+    with caplog.at_level(logging.WARNING, logger="abco_data.hub.fetch"):
         again = hub.fetch(DATASET, progress=False)
     assert again == path
     assert again.read_bytes() == hub_env.data
@@ -415,7 +417,7 @@ def test_dataset_missing_from_manifest_is_generated_and_logged(
 ) -> None:
     hub_env.write_manifest(files={})
     monkeypatch.setattr(hub, "generate", fake_generator(b"fresh"))
-    with caplog.at_level(logging.INFO, logger="abco_data.hub"):
+    with caplog.at_level(logging.INFO, logger="abco_data.hub.fetch"):
         path = hub.fetch(DATASET, progress=False)
     assert path.read_bytes() == b"fresh"
     assert "no entry for abco/maze3x3-expert-v0" in caplog.text
@@ -472,7 +474,7 @@ def test_full_abco_cache_uses_the_verified_hub_copy(
         raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr(hub, "install_verified", no_space)
-    with caplog.at_level(logging.WARNING, logger="abco_data.hub"):
+    with caplog.at_level(logging.WARNING, logger="abco_data.hub.fetch"):
         path = hub.fetch(DATASET, progress=False)
     assert path.is_relative_to(hub_env.hf_cache) and path.read_bytes() == hub_env.data
     assert "No space left on device" in caplog.text and str(hub_env.abco_cache) in caplog.text
@@ -503,7 +505,7 @@ def test_invalid_manifest_is_a_clear_error(hub_env: HubEnv) -> None:
 
 
 def test_shipped_manifest_is_valid() -> None:
-    manifest = hub.read_manifest(Path(hub.__file__).with_name("manifest.json"))
+    manifest = hub.read_manifest(Path(abco_data.__file__).with_name("manifest.json"))
     assert manifest.repo_id == REPO
     for dataset_id in manifest.files:
         assert dataset_id in abco_data.DATASET_IDS
@@ -515,7 +517,7 @@ def test_subprocess_with_hf_endpoint_set_before_import(hub_env: HubEnv) -> None:
         f"""
         import huggingface_hub.constants as c
         assert c.ENDPOINT == {hub_env.server.url!r}, c.ENDPOINT
-        from abco_data import hub
+        from abco_data.hub import fetch as hub
         path = hub.download({DATASET!r}, progress=False)
         print(path)
         """
@@ -652,7 +654,7 @@ def test_hub_that_never_answers_falls_back_to_generation(
     with caplog.at_level(logging.WARNING):
         assert hub.fetch(DATASET, progress=False).read_bytes() == hub_env.data
     assert _hub_warnings(caplog) == []  # huggingface_hub's retries stay quiet
-    assert [r.getMessage() for r in caplog.records if r.name == "abco_data.hub"] == [
+    assert [r.getMessage() for r in caplog.records if r.name == "abco_data.hub.fetch"] == [
         f"{err.value}; generating {DATASET} locally instead"]
 
 

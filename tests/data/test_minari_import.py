@@ -23,8 +23,8 @@ from abco_data.errors import (
 minari = pytest.importorskip("minari")
 from minari.data_collector import EpisodeBuffer  # noqa: E402
 
-from abco_data.minari_export import export_to_minari  # noqa: E402
-from abco_data.minari_import import import_minari  # noqa: E402
+from abco_data.interop.minari_export import export_to_minari  # noqa: E402
+from abco_data.interop.minari_import import import_minari  # noqa: E402
 
 
 @pytest.fixture(autouse=True)

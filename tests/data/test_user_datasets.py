@@ -18,13 +18,13 @@ from abco_data.errors import (
     UnknownDatasetError,
     WrongKindError,
 )
-from abco_data.manifest import cached_path
-from abco_data.user_datasets import (
+from abco_data.hub.manifest import cached_path
+from abco_data.user.datasets import (
     read_user_manifest,
     register_user_dataset,
     user_manifest_path,
 )
-from abco_data.user_ids import check_user_id, is_user_id, user_id_for_file
+from abco_data.user.ids import check_user_id, is_user_id, user_id_for_file
 
 SMALL = {"reference_episodes": 2, "reference_expert_episodes": 1, "progress": False}
 

@@ -196,7 +196,7 @@ def test_probability_of_improvement_is_rliables() -> None:
 
 @needs_rliable
 def test_aggregates_of_a_constructed_grid(reported: dict[str, Any], synthetic: Path) -> None:
-    part = _section(reported["md"], "## Aggregates across the 6 environments")
+    part = _section(reported["md"], "## Aggregates: 6 of the 6 environments")
     assert "- left out: knn-ifo (no finished run on Acrobot-v1," in part
     assert "[Performance profiles" in part and "(performance_profile.png)" in part
     assert (reported["out"] / "performance_profile.png").stat().st_size > 0
@@ -253,7 +253,7 @@ def test_report_without_rliable(synthetic: Path, tmp_path: Path,
     monkeypatch.setitem(sys.modules, "rliable", None)  # `import rliable` fails
     assert abco_main(["report", str(synthetic), "--out", str(tmp_path)]) == 0
     md = (tmp_path / "report.md").read_text()
-    part = _section(md, "## Aggregates across the 6 environments")
+    part = _section(md, "## Aggregates: 6 of the 6 environments")
     assert "Not computed: rliable is not installed" in part
     assert 'pip install "abco[stats]"' in part
     assert not (tmp_path / "performance_profile.png").exists()
@@ -287,7 +287,7 @@ def test_a_users_grid_has_no_goal_of_the_project(tmp_path: Path) -> None:
         mp.setattr(aggregate, "REPS", 50)
         md = write_report(root, tmp_path / "out")["report"].read_text()
     assert "issue" not in md and "not decided" not in md and "seven-method" not in md
-    assert "Aggregates across the 2 environments of Table 1 in this grid" in md
+    assert "## Aggregates: 2 of the 6 environments of Table 1" in md
     assert "None: every expected cell has every seed." in md
 
 

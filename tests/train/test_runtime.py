@@ -26,3 +26,11 @@ def test_seeds_fix_every_stream() -> None:
     assert runtime.derived_seed(3, 1) != runtime.derived_seed(3, 2)
     assert np.array_equal(runtime.derived_rng(3, 7).permutation(10),
                           runtime.derived_rng(3, 7).permutation(10))  # fmt: skip
+
+
+def test_auto_keeps_vector_networks_on_the_cpu() -> None:
+    from abco_train.harness.runtime import resolve_device
+
+    assert resolve_device("auto", "mlp") == "cpu"  # a GPU does not pay for them
+    assert resolve_device("auto", "cnn") == ("cuda" if torch.cuda.is_available() else "cpu")
+    assert resolve_device("cpu", "cnn") == "cpu"

@@ -102,7 +102,7 @@ def _expert_from_state(n):
 
 
 def test_maze_evaluation_on_all_layouts_batched():
-    from abco_data.reference import maze_reference
+    from abco_data.generation.reference import maze_reference
 
     calls = []
 

@@ -17,7 +17,7 @@ import torch
 from train_testing import tiny_config
 
 import abco_data
-from abco_data.arrays import MazeFrames
+from abco_data.format.arrays import MazeFrames
 from abco_data.torch_view import frames_tensor
 from abco_train.harness import loop
 from abco_train.harness import training_data as training_data_module

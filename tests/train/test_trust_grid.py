@@ -327,16 +327,18 @@ def test_other_lines_of_the_bench_log_are_kept_as_they_are(tmp_path: Path, insta
 # -- frictions -------------------------------------------------------------------------------------
 
 
-def test_threads_default_to_the_trainers_one(tmp_path: Path, instant: list[dict[str, Any]],
-                                             monkeypatch: pytest.MonkeyPatch) -> None:  # fmt: skip
+def test_threads_default_to_the_cores_over_the_jobs(
+    tmp_path: Path, instant: list[dict[str, Any]], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """jobs x threads fill the cores: 8 cores, 1 job -> 8 threads, 2 jobs -> 4; --threads wins."""
     monkeypatch.setattr(bench.backends, "available_cores", lambda: 8)
     bench.run_grid(bench.plan(["CartPole-v1"], ["bc"], [0]), tmp_path / "a", jobs=1, quiet=True)
     assert abco_main(["bench", "--envs", "CartPole-v1", "--methods", "bc", "--seeds", "1",
                       "--out", str(tmp_path / "b"), "--quiet", "--jobs", "2"]) == 0  # fmt: skip
     bench.run_grid(bench.plan(["CartPole-v1"], ["bc"], [2]), tmp_path / "c", threads=3,
                    quiet=True)  # fmt: skip
-    assert [t["threads"] for t in instant] == [1, 1, 3]
-    assert _lines(tmp_path / "a" / bench.BENCH_LOG)[0]["threads"] == 1
+    assert [t["threads"] for t in instant] == [8, 4, 3]
+    assert _lines(tmp_path / "a" / bench.BENCH_LOG)[0]["threads"] == 8
 
 
 def test_a_failed_cells_message_cannot_forge_a_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,

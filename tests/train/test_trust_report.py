@@ -68,7 +68,7 @@ def test_the_summary_says_first_what_ran(tmp_path: Path) -> None:
     goals = md.split("## Goals", 1)[1].split("\n## ", 1)[0]
     assert goals.count("| Acrobot-v1 |") == 0 and "not run" not in goals
     assert "- ABCO(α): no run on Acrobot-v1, MountainCar-v0," in goals
-    assert "- IUPE: no run on any environment (not decided there)." in goals
+    assert "- IUPE: no run on any environment in this grid." in goals
 
 
 #: Crafted records, one per schema rule: (file under the grid, its content, the reason given).

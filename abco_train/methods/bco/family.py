@@ -38,12 +38,11 @@ at chance the run stops with :class:`~abco_train.methods.base.TrainingFailed` (s
 ``idm_at_chance``) instead of ending with a normal-looking result.
 
 With a ``--budget`` (environment interactions), ``I_pre`` is the first ``budget`` transitions
-at most, and the harness cuts the runs learned from at the budget left.
-
-Budgets are equal across variants: a variant that runs one iteration (``bc``, ``bco``) trains
-its policy for as many epochs as the iterative ones do over all their iterations,
-``policy_epochs * (first_epochs_factor + iterations)``, so no baseline is behind on epochs.
-With ``min_updates`` (the ``general`` preset's), ``policy_epochs`` and ``idm_epochs`` are first
+at most, and the harness cuts the runs learned from at the budget left. Budgets are equal
+across variants: a variant that runs one iteration (``bc``, ``bco``) trains its policy for as
+many epochs as the iterative ones do over all their iterations, ``policy_epochs *
+(first_epochs_factor + iterations)``, so no baseline is behind on epochs. With
+``min_updates`` (the ``general`` preset's), ``policy_epochs`` and ``idm_epochs`` are first
 raised on small data until one such unit makes at least that many minibatch updates (the
 first K layouts of the procedural datasets range from 850 to 84,000 expert transitions);
 with ``max_updates`` (the ``general`` preset's too) a policy unit makes at most that many, so
@@ -54,9 +53,8 @@ Variants (switches of one implementation, see :data:`VARIANTS`): ``bc`` (policy 
 expert actions), ``bco`` (BCO(0): IDM on ``I_pre`` once), ``bco-alpha`` (IDM re-trained on all
 post-demonstrations, the ABCO paper's reading of BCO(alpha)), ``bco-alpha-torabi`` (Torabi et
 al.'s BCO(alpha): ``I_pre`` plus every post-demonstration so far), ``abco`` (attention +
-partial sampling), and the ablations of Table 2:
-``attention`` (attention, BCO(alpha) data), ``sampling-partial`` and ``sampling-whole`` (no
-attention), ``abco-whole`` (attention + whole sampling).
+partial sampling), and Table 2's ablations: ``attention`` (attention, BCO(alpha) data),
+``sampling-partial``, ``sampling-whole`` (no attention), ``abco-whole`` (attention + whole).
 """
 
 from __future__ import annotations

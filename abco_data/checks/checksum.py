@@ -32,12 +32,12 @@ from typing import Any
 
 from abco_data.dataset import Dataset
 from abco_data.errors import ChecksumError, CorruptDatasetError
-from abco_data.files import file_digest
-from abco_data.generate import GENERATOR, GENERATOR_VERSION, generate
-from abco_data.manifest import Manifest, as_manifest
+from abco_data.format.files import file_digest
+from abco_data.generation.generate import GENERATOR, GENERATOR_VERSION, generate
+from abco_data.hub.manifest import Manifest, as_manifest
 from abco_data.registry import DATASET_IDS, spec
-from abco_data.user_datasets import user_entry
-from abco_data.user_ids import is_user_id
+from abco_data.user.datasets import user_entry
+from abco_data.user.ids import is_user_id
 
 __all__ = ["ExpectedDigest", "expected_digest", "check_checksum", "claimed_overrides"]
 
@@ -120,7 +120,7 @@ def expected_digest(ds: Dataset, *,
                     ) -> ExpectedDigest | None:
     """The digest ``ds``'s file must have (see the module docstring), or None when no
     checksum can be known: an id neither the manifest, this abco's registry nor the user
-    manifest (:mod:`abco_data.user_datasets`: a registered user dataset) knows.
+    manifest (:mod:`abco_data.user.datasets`: a registered user dataset) knows.
 
     Raises:
         CorruptDatasetError: Unreadable claims (see :func:`claimed_overrides`).

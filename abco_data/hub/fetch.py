@@ -18,7 +18,7 @@
 
 Every call to the Hub has a total time limit, ``$ABCO_HUB_TIMEOUT`` seconds (default 60),
 connection, answers and huggingface_hub's retries included, and may not receive more bytes
-than the manifest's size of the file (:mod:`abco_data.hub_calls`): a Hub that never answers,
+than the manifest's size of the file (:mod:`abco_data.hub.calls`): a Hub that never answers,
 drips its answer or announces a file far larger than the manifest's counts as any other Hub
 failure, and :func:`load` generates the dataset instead. huggingface_hub's retry warnings are
 held back; the failure is reported once, in one line.
@@ -37,11 +37,11 @@ huggingface_hub is imported); abco_data passes none of them itself. Nothing half
 has a cache file's name: every file is written under a hidden temporary name in the cache
 folder and renamed with :func:`os.replace` once verified.
 
-The manifest and the checks against it live in :mod:`abco_data.manifest`; uploading (for
-maintainers) in :mod:`abco_data.publish`.
+The manifest and the checks against it live in :mod:`abco_data.hub.manifest`; uploading (for
+maintainers) in :mod:`abco_data.hub.publish`.
 
 Example:
-    >>> from abco_data.hub import cached_path
+    >>> from abco_data.hub.fetch import cached_path
     >>> cached_path("abco/maze5x5-expert-v0", cache_dir="/data/abco").parent.as_posix()
     '/data/abco'
 """
@@ -64,17 +64,17 @@ from abco_data.errors import (
     DatasetWriteError,
     WrongKindError,
 )
-from abco_data.fetch_lock import acquire_fetch_lock
-from abco_data.files import (
+from abco_data.format.files import (
     atomic_target,
     check_target,
     file_digest,
     remove_path,
     remove_stale_temporaries,
 )
-from abco_data.generate import generate
-from abco_data.hub_calls import HubCallStopped, call_hub, hub_timeout
-from abco_data.manifest import (
+from abco_data.generation.generate import generate
+from abco_data.hub.calls import HubCallStopped, call_hub, hub_timeout
+from abco_data.hub.fetch_lock import acquire_fetch_lock
+from abco_data.hub.manifest import (
     CACHE_ENV,
     DEFAULT_REPO_ID,
     Manifest,
@@ -89,8 +89,8 @@ from abco_data.manifest import (
 )
 from abco_data.progress import log_progress_class
 from abco_data.registry import check_layout_count, spec
-from abco_data.user_datasets import load_user_dataset
-from abco_data.user_ids import is_user_id
+from abco_data.user.datasets import load_user_dataset
+from abco_data.user.ids import is_user_id
 
 __all__ = [
     "DEFAULT_REPO_ID",
@@ -346,7 +346,7 @@ def load(dataset_id: str, *, cache_dir: str | os.PathLike[str] | None = None,
             (:meth:`~abco_data.Dataset.first_layouts`); the whole file is fetched and checked.
 
     A user dataset id (``local/NAME-v0``) opens its registered file once checked against the
-    user manifest of ``cache_dir`` (:func:`abco_data.user_datasets.load_user_dataset`).
+    user manifest of ``cache_dir`` (:func:`abco_data.user.datasets.load_user_dataset`).
 
     Returns:
         The opened dataset (:func:`abco_data.open_dataset` of the cached file).

@@ -1,8 +1,8 @@
 """Recording a dataset of the user's own from any Gymnasium env: :func:`record`.
 
-A policy (:mod:`abco_data.policies`: a callable on one observation, a ``MODULE:CALLABLE``,
+A policy (:mod:`abco_data.user.policies`: a callable on one observation, a ``MODULE:CALLABLE``,
 a Stable-Baselines3 model) plays the env; its episodes are written in abco's format by the
-writer of the built-in datasets (:mod:`abco_data.user_writer`), every episode's ``T + 1``
+writer of the built-in datasets (:mod:`abco_data.user.writer`), every episode's ``T + 1``
 observations, the actions kept as ``idm_eval_actions`` for an expert dataset and as
 ``actions`` for pre-demonstrations. Episode ``i`` is reset with seed ``seed + i`` (and a
 random policy seeded with it), so the same policy, env and seed give the same file.
@@ -32,15 +32,15 @@ from typing import Any
 import numpy as np
 
 import abco_envs
-from abco_data.bounds import MAX_FRAME_BYTES, MAX_TRANSITIONS, check_params
 from abco_data.errors import InvalidParameterError
-from abco_data.files import check_target
 from abco_data.format import to_json
-from abco_data.policies import Policy, checked_policy, load_policy, policy_name
+from abco_data.format.files import check_target
+from abco_data.generation.bounds import MAX_FRAME_BYTES, MAX_TRANSITIONS, check_params
+from abco_data.generation.reference import REFERENCE_SEED, ReferenceReturns
 from abco_data.progress import progress_bar
-from abco_data.reference import REFERENCE_SEED, ReferenceReturns
-from abco_data.user_datasets import register_user_dataset, user_target
-from abco_data.user_writer import (
+from abco_data.user.datasets import register_user_dataset, user_target
+from abco_data.user.policies import Policy, checked_policy, load_policy, policy_name
+from abco_data.user.writer import (
     EpisodeColumns,
     check_spaces,
     clean_observations,
@@ -178,7 +178,7 @@ def record(env_id: str, policy: Policy | str | None = None, *, kind: str = "expe
             it). Observations: a ``Box`` vector or ``uint8`` ``H x W x C`` image; actions:
             ``Discrete`` (others are refused in one line that says how to wrap the env).
         policy: A callable on one observation returning one action, a ``MODULE:CALLABLE``
-            or the path of a Stable-Baselines3 model ``.zip`` (:mod:`abco_data.policies`).
+            or the path of a Stable-Baselines3 model ``.zip`` (:mod:`abco_data.user.policies`).
             Default for ``kind="pre"``: uniform random actions; an expert needs one.
         kind: ``"expert"`` (the actions kept as ``idm_eval_actions``) or ``"pre"``.
         episodes: Record this many whole episodes; or
@@ -186,7 +186,7 @@ def record(env_id: str, policy: Policy | str | None = None, *, kind: str = "expe
         seed: Episode ``i`` is reset with ``seed + i``.
         out: The file to write; default, with ``id``, ``<data home>/<namespace>/<NAME-vN>.hdf5``.
         id: A user dataset id (``local/NAME-v0``), registered in the user manifest
-            (:mod:`abco_data.user_datasets`) so that ``abco_data.load(id)`` finds and checks
+            (:mod:`abco_data.user.datasets`) so that ``abco_data.load(id)`` finds and checks
             it. Without it the file holds ``local/<file stem>-v0`` and is not registered.
         env_kwargs: Keyword arguments of ``gymnasium.make`` (stored in the file).
         max_episode_steps: A step limit for the env (``gymnasium.make``'s); needed when the

@@ -34,10 +34,10 @@ from minari.data_collector import EpisodeBuffer
 from minari.namespace import create_namespace, list_local_namespaces
 
 import abco_envs  # noqa: F401  (registers the maze ids that the datasets' env specs name)
-from abco_data.arrays import DatasetArrays
 from abco_data.dataset import Dataset, open_dataset
-from abco_data.files import atomic_target, check_target, remove_path, temporary_name
 from abco_data.format import IDM_EVAL_ACTIONS
+from abco_data.format.arrays import DatasetArrays
+from abco_data.format.files import atomic_target, check_target, remove_path, temporary_name
 
 __all__ = ["export_to_minari", "NO_ACTIONS"]
 

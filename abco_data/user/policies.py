@@ -36,7 +36,7 @@ import numpy as np
 from gymnasium import spaces
 
 from abco_data.errors import DatasetError, InvalidParameterError
-from abco_data.user_code import import_user_module, names_a_file
+from abco_data.user.code import import_user_module, names_a_file
 
 __all__ = ["Policy", "load_policy", "checked_policy", "policy_name", "SB3_MAX_DATA_BYTES"]
 

@@ -10,7 +10,7 @@ arrays (every maze move against the walls, every frame re-rendered).
 
 Example:
     >>> import numpy as np
-    >>> from abco_data.arrays import DatasetArrays
+    >>> from abco_data.format.arrays import DatasetArrays
     >>> one = np.array([0]); a = DatasetArrays(
     ...     observations=np.zeros((2, 1), np.float32), actions=np.array([1]),
     ...     idm_eval_actions=None, rewards=np.array([np.nan]), terminations=np.array([True]),
@@ -29,8 +29,8 @@ from typing import Any, NamedTuple
 import numpy as np
 from gymnasium import spaces
 
-from abco_data.arrays import DatasetArrays
 from abco_data.errors import CorruptDatasetError
+from abco_data.format.arrays import DatasetArrays
 
 __all__ = ["check_values", "check_observations", "maze_columns", "MazeColumns",
            "MAZE_CELL_BITS"]
@@ -61,7 +61,7 @@ def _check_episode_ends(a: DatasetArrays, path: object) -> None:
 
 
 class MazeColumns(NamedTuple):
-    """The maze-only columns of :class:`~abco_data.arrays.DatasetArrays`, all present."""
+    """The maze-only columns of :class:`~abco_data.format.arrays.DatasetArrays`, all present."""
 
     positions: np.ndarray
     layouts: np.ndarray

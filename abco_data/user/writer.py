@@ -37,7 +37,7 @@ from abco_data.format import (
     space_to_json,
     to_json,
 )
-from abco_data.reference import ReferenceReturns
+from abco_data.generation.reference import ReferenceReturns
 
 __all__ = ["KIND_NAMES", "kind_name", "EpisodeColumns", "check_spaces", "clean_observations",
            "write_episodes", "env_spec_json", "mean_return", "SPACES_HINT"]

@@ -14,11 +14,11 @@ from typing import Any
 from huggingface_hub import CommitOperationAdd, HfApi, hf_hub_download
 
 from abco_data.errors import DatasetError, DatasetNotAvailableError
-from abco_data.files import file_digest
 from abco_data.format import attr_value, open_h5
-from abco_data.hub import HUB_ERRORS
-from abco_data.hub_calls import call_hub
-from abco_data.manifest import (
+from abco_data.format.files import file_digest
+from abco_data.hub.calls import call_hub
+from abco_data.hub.fetch import HUB_ERRORS
+from abco_data.hub.manifest import (
     Manifest,
     as_manifest,
     cache_filename,
@@ -174,7 +174,7 @@ def push(dataset_id: str, repo_id: str, *, path: str | os.PathLike[str] | None =
         manifest: A manifest or the path of one; a file listed there must match its entry.
 
     Every request has the total time limit of ``$ABCO_HUB_TIMEOUT`` (see
-    :mod:`abco_data.hub_calls`); set it higher to upload a large file on a slow line.
+    :mod:`abco_data.hub.calls`); set it higher to upload a large file on a slow line.
 
     Returns:
         The commit id.

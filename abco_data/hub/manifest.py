@@ -32,7 +32,7 @@ from abco_data.errors import (
     InvalidParameterError,
     UnknownDatasetError,
 )
-from abco_data.files import atomic_target, file_digest
+from abco_data.format.files import atomic_target, file_digest
 from abco_data.registry import DATASET_IDS, spec
 
 __all__ = [
@@ -124,11 +124,12 @@ def check_repo_id(repo_id: object, what: str = "Hub repo id") -> str:
 
 
 def default_manifest_path() -> Path:
-    """``$ABCO_DATA_MANIFEST`` if set, else the ``manifest.json`` shipped next to this module."""
+    """``$ABCO_DATA_MANIFEST`` if set, else the ``manifest.json`` shipped at the top of the
+    package (``abco_data/manifest.json``)."""
     override = os.environ.get(MANIFEST_ENV)
     if override:
         return Path(override).expanduser()
-    return Path(__file__).with_name("manifest.json")
+    return Path(__file__).parents[1] / "manifest.json"
 
 
 def read_manifest(path: str | os.PathLike[str] | None = None) -> Manifest:

@@ -31,8 +31,8 @@ def _json_object(text: str) -> dict[str, Any]:
 
 def _report(path: Path, dataset_id: str | None, seconds: float) -> None:
     from abco_data.dataset import open_dataset
-    from abco_data.files import sha256_of
-    from abco_data.user_datasets import user_manifest_path
+    from abco_data.format.files import sha256_of
+    from abco_data.user.datasets import user_manifest_path
 
     ds = open_dataset(path)
     print(f"{ds.id}: wrote {path} ({path.stat().st_size} bytes, sha256 {sha256_of(path)}),"
@@ -44,7 +44,7 @@ def _report(path: Path, dataset_id: str | None, seconds: float) -> None:
 
 
 def _cmd_record(args: argparse.Namespace) -> int:
-    from abco_data.record import record
+    from abco_data.user.record import record
 
     start = time.perf_counter()
     path = record(args.env, args.policy, kind=args.kind, episodes=args.episodes,
@@ -59,7 +59,7 @@ def _cmd_record(args: argparse.Namespace) -> int:
 
 
 def _cmd_import_minari(args: argparse.Namespace) -> int:
-    from abco_data.minari_import import import_minari
+    from abco_data.interop.minari_import import import_minari
 
     start = time.perf_counter()
     path = import_minari(args.source, out=args.out, id=args.id, kind=args.kind,
@@ -122,7 +122,7 @@ def add_user_actions(sub: Any) -> None:
 
 def user_list_rows(home: Path) -> list[tuple[str, str, str, str, str, str]]:
     """``(id, env, kind, size, source, cached)`` of each registered user dataset."""
-    from abco_data.user_datasets import read_user_manifest
+    from abco_data.user.datasets import read_user_manifest
 
     return [(e.dataset_id, e.env_id, e.kind, f"{e.size / 1e6:.1f} MB", "user",
              "yes" if e.path.is_file() else "missing")
@@ -136,7 +136,7 @@ def print_user_info(dataset_id: str, home: Path) -> Path:
         UnknownDatasetError: Not registered.
     """
     from abco_data.errors import UnknownDatasetError
-    from abco_data.user_datasets import user_entry, user_manifest_path
+    from abco_data.user.datasets import user_entry, user_manifest_path
 
     entry = user_entry(dataset_id, home)
     if entry is None:

@@ -1,6 +1,6 @@
 """The user manifest: where each of the user's own datasets is, and what its bytes are.
 
-A dataset recorded or imported under an id of the user's own (:mod:`abco_data.user_ids`,
+A dataset recorded or imported under an id of the user's own (:mod:`abco_data.user.ids`,
 ``local/cartpole-mine-v0``) is registered in ``user-datasets.json`` in the abco data home
 (``$ABCO_DATA_HOME``, default ``~/.cache/abco/datasets``)::
 
@@ -46,10 +46,10 @@ from abco_data.errors import (
     InvalidParameterError,
     UnknownDatasetError,
 )
-from abco_data.files import atomic_target, file_digest
 from abco_data.format import KINDS
-from abco_data.manifest import data_home
-from abco_data.user_ids import check_user_id, split_user_id, user_id_for_file
+from abco_data.format.files import atomic_target, file_digest
+from abco_data.hub.manifest import data_home
+from abco_data.user.ids import check_user_id, split_user_id, user_id_for_file
 
 __all__ = ["USER_MANIFEST_NAME", "LOCK_TIMEOUT", "UserDatasetEntry", "user_manifest_path",
            "user_dataset_path", "read_user_manifest", "user_entry", "register_user_dataset",

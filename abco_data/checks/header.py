@@ -2,7 +2,7 @@
 
 :func:`read_header` checks the format (:func:`~abco_data.format.check_header`), that the id
 agrees with the env and kind (and is one abco knows, or a user id:
-:mod:`abco_data.user_ids`), the counts and the episode offsets
+:mod:`abco_data.user.ids`), the counts and the episode offsets
 against the columns, the reference returns, and the spaces against the stored observations;
 it reads no bulk data.
 """
@@ -31,11 +31,11 @@ from abco_data.format import (
     read_column,
     space_from_json,
 )
-from abco_data.generate import GENERATOR
-from abco_data.manifest import read_manifest
-from abco_data.reference import ReferenceReturns
+from abco_data.generation.generate import GENERATOR
+from abco_data.generation.reference import ReferenceReturns
+from abco_data.hub.manifest import read_manifest
 from abco_data.registry import ACTION_COUNTS, DATASET_IDS, spec
-from abco_data.user_ids import is_user_id
+from abco_data.user.ids import is_user_id
 
 __all__ = ["Header", "read_header", "read_whole_column"]
 

@@ -6,7 +6,7 @@ takes an id of a namespace of its own, such as ``local/cartpole-mine-v0``: a nam
 name of letters, digits, ``_`` and ``-`` (the name also ``.``), and a version ``-vN`` that the
 user changes whenever the bytes would. Namespace ``abco`` is reserved (in any case), and so is
 every id the shipped manifest lists, so a user id never shadows a built-in one. Readers accept
-a file holding a user id; :mod:`abco_data.user_datasets` keeps the registered ones' bytes.
+a file holding a user id; :mod:`abco_data.user.datasets` keeps the registered ones' bytes.
 
 Example:
     >>> is_user_id("local/cartpole-mine-v0"), is_user_id("abco/cartpole-expert-v0")
@@ -25,7 +25,7 @@ import re
 from pathlib import PurePath
 
 from abco_data.errors import InvalidParameterError
-from abco_data.manifest import read_manifest
+from abco_data.hub.manifest import read_manifest
 from abco_data.registry import DATASET_IDS
 
 __all__ = ["USER_NAMESPACE", "RESERVED_NAMESPACES", "USER_ID_FORM", "is_user_id",

@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 
-from abco_data.files import check_target
 from abco_data.format import (
     FORMAT_NAME,
     FORMAT_VERSION,
@@ -28,9 +27,10 @@ from abco_data.format import (
     space_to_json,
     to_json,
 )
-from abco_data.manifest import data_home
+from abco_data.format.files import check_target
+from abco_data.generation.reference import ReferenceReturns, classic_reference, maze_reference
+from abco_data.hub.manifest import data_home
 from abco_data.progress import progress_bar
-from abco_data.reference import ReferenceReturns, classic_reference, maze_reference
 from abco_data.registry import DATASET_SPLITS, DatasetSpec, spec
 
 __all__ = ["generate", "data_home", "GENERATOR", "GENERATOR_VERSION", "reference_for",
@@ -157,7 +157,7 @@ def generate(dataset_id: str, path: str | os.PathLike[str] | None = None, *,
         UnknownDatasetError: Unknown id.
         TypeError: An override the dataset has no parameter for.
         InvalidParameterError: An override of the wrong type or beyond its bound
-            (:mod:`abco_data.bounds`; also a ``ValueError``), refused before any work.
+            (:mod:`abco_data.generation.bounds`; also a ``ValueError``), refused before any work.
         ValueError: Overrides without an explicit ``path`` (the cache holds standard files),
             or a ``split`` no dataset may be made from.
         InvalidTargetError: ``path`` is a device, a FIFO, a folder or a symbolic link

@@ -3,7 +3,7 @@
 :func:`import_minari` reads a Minari dataset through Minari's public API
 (``minari.load_dataset``, or ``minari.MinariDataset`` on a folder, ``iterate_episodes``,
 ``recover_environment``) and writes it in abco's format with the writer of the user's own
-datasets (:mod:`abco_data.user_writer`): by default an expert dataset of its observations,
+datasets (:mod:`abco_data.user.writer`): by default an expert dataset of its observations,
 every episode's ``T + 1``, its actions kept apart as ``idm_eval_actions`` (a dataset that
 abco exported, which holds no actions, gives back the ``infos["idm_eval_actions"]`` it
 carries). An episode that ends neither in a termination nor a truncation (cut short when
@@ -14,13 +14,13 @@ of the dataset's metadata, where it has them. A missing random reference is meas
 built-in datasets' are, uniform random actions in the dataset's environment
 (``recover_environment``) over ``reference_episodes`` episodes reset with seeds
 ``12345 + i``; a missing expert reference is the mean return of the dataset's own episodes
-(the expert's, as recorded). The file holds a user id (:mod:`abco_data.user_ids`): one given
+(the expert's, as recorded). The file holds a user id (:mod:`abco_data.user.ids`): one given
 (``id``, then registered) or one made of the file name.
 
 Minari files come from elsewhere: the work is bounded (at most
-:data:`~abco_data.bounds.MAX_TRANSITIONS` steps and
-:data:`~abco_data.bounds.MAX_FRAME_BYTES` of observations, counted as they are read, whatever
-the metadata says) and every value is checked as a recording's are.
+:data:`~abco_data.generation.bounds.MAX_TRANSITIONS` steps and
+:data:`~abco_data.generation.bounds.MAX_FRAME_BYTES` of observations, counted as they are
+read, whatever the metadata says) and every value is checked as a recording's are.
 """
 
 from __future__ import annotations
@@ -35,19 +35,19 @@ import numpy as np
 from gymnasium import spaces
 
 import abco_envs
-from abco_data.bounds import MAX_FRAME_BYTES, MAX_TRANSITIONS, check_params
 from abco_data.errors import (
     CorruptDatasetError,
     DatasetError,
     InvalidParameterError,
     UnknownDatasetError,
 )
-from abco_data.files import check_target
 from abco_data.format import IDM_EVAL_ACTIONS, to_json
+from abco_data.format.files import check_target
+from abco_data.generation.bounds import MAX_FRAME_BYTES, MAX_TRANSITIONS, check_params
+from abco_data.generation.reference import REFERENCE_SEED, ReferenceReturns
 from abco_data.progress import progress_bar
-from abco_data.reference import REFERENCE_SEED, ReferenceReturns
-from abco_data.user_datasets import register_user_dataset, user_target
-from abco_data.user_writer import (
+from abco_data.user.datasets import register_user_dataset, user_target
+from abco_data.user.writer import (
     EpisodeColumns,
     check_spaces,
     clean_observations,
@@ -62,7 +62,7 @@ __all__ = ["import_minari", "GENERATOR", "GENERATOR_VERSION"]
 logger = logging.getLogger(__name__)
 
 #: ``generator`` and ``generator_version`` of an imported file.
-GENERATOR = "abco_data.minari_import"
+GENERATOR = "abco_data.interop.minari_import"
 GENERATOR_VERSION = 1
 #: What Minari and h5py raise on a dataset they cannot read (Minari asserts its metadata).
 _READ_ERRORS = (OSError, ValueError, KeyError, TypeError, AssertionError, IndexError)
@@ -248,7 +248,7 @@ def import_minari(source: str | os.PathLike[str], *, out: str | os.PathLike[str]
 
     Example:
         >>> import tempfile, os, abco_data
-        >>> from abco_data.minari_export import export_to_minari
+        >>> from abco_data.interop.minari_export import export_to_minari
         >>> tmp = tempfile.mkdtemp()
         >>> pole = abco_data.generate("abco/cartpole-expert-v0", os.path.join(tmp, "c.hdf5"),
         ...     progress=False, episodes=2, reference_episodes=1, reference_expert_episodes=1)

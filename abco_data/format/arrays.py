@@ -1,7 +1,7 @@
 """A dataset's data in memory: :class:`Episode` (one episode), :class:`DatasetArrays` (every
 column) and :class:`MazeFrames` (maze frames kept as the layout and agent cell that draw
 them). Plain records of numpy arrays, made by :class:`abco_data.Dataset`'s readers and
-checked by :func:`abco_data.validation.check_values`; this module imports no other part of
+checked by :func:`abco_data.format.validation.check_values`; this module imports no other part of
 abco_data (the maze renderer comes from abco_envs).
 
 Example:
