@@ -13,6 +13,7 @@ training).
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -147,7 +148,8 @@ def format_table(final: dict[str, Any]) -> str:
         mark = " *" if key == final.get("headline") else ""
         lines.append(f"{key:<18}{shown}{m['performance']:>8.3f}{m['aer']:>10.3f}"
                      f"{m['success_rate']:>9.2f}{m['episodes']:>10d}{mark}")
-    lines += _legend(final, [key for key, _ in rows])
+    lines += [wrapped for line in _legend(final, [key for key, _ in rows])
+              for wrapped in textwrap.wrap(line, 96, subsequent_indent="  ")]
     for name, path in final.get("figures", {}).items():
         lines.append(f"plot {name}: {path}")
     return "\n".join(lines)

@@ -36,6 +36,7 @@ from abco_train.config.run import RunConfig
 from abco_train.harness.checkpoint import load_checkpoint, restore, save_checkpoint
 from abco_train.harness.code_version import code_version
 from abco_train.harness.evaluation import EVAL_SEED, episodes, final_evaluation
+from abco_train.harness.metrics import health_summary
 from abco_train.harness.rollouts import Rollouts, rollout, score
 from abco_train.harness.run_folder import (
     CHECKPOINT,
@@ -165,6 +166,7 @@ def _train(cfg: RunConfig, run_dir: Path, stop_after: int | None) -> dict[str, A
 
     final = final_evaluation(cfg, data, method, history, run_dir)
     final.update(_stop(history))
+    final["health"] = health_summary(history)  # what the checks flagged; they never stop a run
     write_atomic(run_dir / FINAL, json.dumps(final, indent=2))
     return final
 

@@ -9,6 +9,9 @@ Reference returns come from the expert dataset (``Dataset.reference``: per layou
 ``train`` and ``test`` splits for mazes, one pair per environment otherwise), always measured
 under the environment's own rules (1000-step cap), whatever the evaluation protocol.
 
+A run's health checks, logged per iteration, are summed up for ``final.json`` by
+:func:`health_summary`.
+
 Example:
     >>> import numpy as np
     >>> performance(np.array([1.0, 0.5, 0.0]), expert=np.array([1.0, 1.0, 2.0]), random=0.0)
@@ -17,11 +20,12 @@ Example:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-__all__ = ["performance", "summarize"]
+__all__ = ["performance", "summarize", "health_summary", "HEALTH_FLAGS"]
 
 
 def performance(returns: np.ndarray, expert: Any, random: Any) -> np.ndarray:
@@ -46,3 +50,26 @@ def summarize(
         "success_rate": float(np.asarray(successes, dtype=np.float64).mean()),
         "episodes": int(len(returns)),
     }
+
+
+#: The health checks a method logs as ``True`` in an iteration's statistics -> their name in
+#: ``final.json``'s ``health`` (:mod:`abco_train.methods.bco.health`).
+HEALTH_FLAGS = {"idm_at_chance": "idm_at_chance", "expert_labels_one_action": "one_action_labels"}
+
+
+def health_summary(history: Sequence[dict[str, Any]]) -> dict[str, list[int]]:
+    """``final.json``'s ``health``: the iterations each check flagged (empty: none did). The
+    checks report; they never stop a run.
+
+    Example:
+        >>> health_summary([{"iteration": 0, "train": {"idm_at_chance": False}},
+        ...                 {"iteration": 1, "train": {"idm_at_chance": True}}])
+        {'idm_at_chance': [1], 'one_action_labels': []}
+    """
+    summary: dict[str, list[int]] = {name: [] for name in HEALTH_FLAGS.values()}
+    for record in history:
+        stats = record.get("train") or {}
+        for key, name in HEALTH_FLAGS.items():
+            if stats.get(key) is True:
+                summary[name].append(int(record["iteration"]))
+    return summary

@@ -45,6 +45,7 @@ from abco_train.report import (
     generalisation,
     headline,
     headline_goals,
+    health,
     provenance,
     ranking,
     tables,
@@ -247,6 +248,7 @@ def _benchmark(by_task: dict[str, list[Run]], flags: dict[tuple[str, str], dict[
     older = sum(c.older if c.scored else len(c.values) for c in ifo)
     lines, pngs = ranking.section(scores, list(cells), out, headline.HEADLINE_LABELS, csv_rows,
                                   older)  # fmt: skip
+    md += ["", "### Health checks", "", *(health.flagged_lines(track) or ["No check fired."])]
     return [*md, "", *lines], pngs | ({"headline_tasks": tasks_png} if tasks_png else {})
 
 
@@ -344,9 +346,8 @@ def _paper_sections(grid: Grid, wall: float | None, agg_lines: list[str],
                     gen_lines: list[str], label: dict[str, str],
                     csv_rows: list[dict[str, Any]], n_envs: int) -> list[str]:  # fmt: skip
     """The sections of a grid with standard-data runs, from the goals to the reference
-    returns: the paper's tables re-measured, the aggregates (``agg_lines``, over ``n_envs``
-    environments), the generalisation section (``gen_lines``), what is missing. Their CSV rows
-    are appended."""
+    returns: the paper's tables, the aggregates (``agg_lines``, over ``n_envs`` environments),
+    the generalisation section (``gen_lines``), what is missing. Their CSV rows are appended."""
     main = grid.main_methods
     t1 = [(e, m, label[m], published(m, e)) for e in TABLE1_ENVS for m in main
           if grid.has(e, m)]  # fmt: skip
@@ -374,6 +375,8 @@ def _paper_sections(grid: Grid, wall: float | None, agg_lines: list[str],
         "", "### Table 2 on the test split", "",
         *(tables.table(grid, t2_test, "test", csv_rows, "table2-test") if t2 else empty),
         "", "## Missing, unfinished, failed or stopped cells", "", *tables.missing(grid),
+        "", "## Health checks (the runs went on to their end)", "",
+        *(health.flagged_lines(grid.runs) or ["No check fired."]),
         "", "## Every (env, method) found: success rate and wall time", "",
         "Train split; every evaluation of every cell is in the CSV (`table` = `all`).", "",
         *tables.all_runs(grid, csv_rows),

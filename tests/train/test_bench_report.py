@@ -282,10 +282,15 @@ def test_a_users_grid_has_no_goal_of_the_project(tmp_path: Path) -> None:
     rows = [fake_run(root, env, m, seed, 0.5 + 0.1 * seed, counts(seed))
             for env in ("CartPole-v1", "AbcoMaze5x5-v0") for m in ("bco", "abco")
             for seed in (0, 1)]  # fmt: skip
+    flagged = rows[-1]  # a run a health check flagged: it ran to its end, it has a score
+    flagged["final"]["health"] = {"idm_at_chance": [1, 2], "one_action_labels": []}
+    (Path(flagged["run_dir"]) / "final.json").write_text(json.dumps(flagged["final"]))
     (root / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(aggregate, "REPS", 50)
         md = write_report(root, tmp_path / "out")["report"].read_text()
+    checks = _section(md, "## Health checks")
+    assert "- AbcoMaze5x5-v0 / abco: idm_at_chance on seed 1" in checks
     assert "issue" not in md and "not decided" not in md and "seven-method" not in md
     assert "## Aggregates: 2 of the 6 environments of Table 1" in md
     assert "None: every expected cell has every seed." in md

@@ -2,8 +2,7 @@
 
 Algorithm 1 of the paper, top to bottom (:meth:`BCOFamily.train_iteration` then
 :meth:`BCOFamily.observe`, called by the harness in :mod:`abco_train.harness.loop` for ``i =
-0..alpha``;
-the harness also owns seeding, the datasets and the run folder):
+0..alpha``; the harness also owns seeding, the datasets and the run folder):
 
 1. ``I_s = I_pre`` (random-policy transitions with true actions).
 2. Train the IDM on ``I_s`` (cross-entropy, Adam); label every expert pair ``(s_t, s_t+1)``
@@ -29,13 +28,9 @@ Choices where the paper is loose:
 The IDM's health is measured, not assumed: a fixed held-out part of ``I_pre`` (true actions,
 :func:`validation_split`) gives its accuracy, overall and per class, after every epoch. Each
 time it trains it runs at most ``idm_epochs`` epochs, stops after ``idm_patience`` epochs
-without a better validation accuracy, and keeps its best weights. **Dead-IDM rule**: an IDM
-whose validation accuracy is below ``chance + DEAD_MARGIN`` after training (chance = the
-largest class share of the held-out actions; judged on at least ``MIN_JUDGED`` held-out
-transitions) predicts one class for everything, and every
-expert pair gets one label; it is re-initialised and trained again once, and if it is still
-at chance the run stops with :class:`~abco_train.methods.base.TrainingFailed` (status
-``idm_at_chance``) instead of ending with a normal-looking result.
+without a better validation accuracy, and keeps its best weights. Its health checks
+(:mod:`abco_train.methods.bco.health`) are logged every iteration and never stop the run;
+with ``idm_reinit`` an IDM at chance is re-initialised and trained once more.
 
 With a ``--budget`` (environment interactions), ``I_pre`` is the first ``budget`` transitions
 at most, and the harness cuts the runs learned from at the budget left. Budgets are equal
@@ -69,8 +64,9 @@ from abco_data.torch_view import frames_tensor
 from abco_train.config.run import RunConfig
 from abco_train.harness.rollouts import Rollouts
 from abco_train.harness.training_data import TrainingData
-from abco_train.methods.base import Method, TrainingFailed
-from abco_train.methods.bco.fitting import fit, predict, validation_split
+from abco_train.methods.base import Method
+from abco_train.methods.bco.fitting import VALIDATION_CAP, fit, predict, validation_split
+from abco_train.methods.bco.health import DEAD_MARGIN, MIN_JUDGED, at_chance, label_health
 from abco_train.methods.bco.options import VARIANTS, BCOOptions
 from abco_train.methods.bco.sampling import sample_training_set
 from abco_train.methods.registry import register
@@ -78,20 +74,12 @@ from abco_train.networks.builders import build_networks, frame_statistics
 
 __all__ = ["VARIANTS", "BCOFamily", "DEAD_MARGIN", "MIN_JUDGED"]
 
-#: An IDM whose held-out accuracy is below ``chance + DEAD_MARGIN`` is at chance (dead).
-DEAD_MARGIN = 0.05
-#: Below this many held-out transitions the accuracy is logged but not judged: on a few dozen
-#: transitions (tiny test datasets) chance and a working IDM cannot be told apart.
-MIN_JUDGED = 200
-
 _T = TypeVar("_T")
 
 
 def _resolved(value: _T | None) -> _T:
-    """A setting that is ``None`` only before resolution: the run config's (``iterations``,
-    ``batch_size``, ``lr``) and the schedule options ``BCOOptions.for_run`` fills in
-    (``idm_input``, ``idm_epochs``, ``idm_patience``, ``idm_samples``, ``policy_epochs``,
-    ``first_epochs_factor``)."""
+    """A setting that is ``None`` only before resolution (the run config's and the schedule
+    options that ``BCOOptions.for_run`` fills in)."""
     assert value is not None, "a setting read before the config and options were resolved"
     return value
 
@@ -194,10 +182,11 @@ class BCOFamily(Method):
             if iteration == 0 or self.idm_data != "pre":
                 idm_set = len(self.s_pre) + len(self.s_pos)
                 idm_epochs = self._floored(_resolved(self.options.idm_epochs), idm_set)
-                stats.update(self._train_idm_checked(idm_epochs * boost, iteration))
+                stats.update(self._train_idm_checked(idm_epochs * boost))
                 stats["idm_samples"] = int(len(self.s_pre) + len(self.s_pos))
             labels = predict(self.idm, self._expert_pairs, expert_n, device=self.device)
             stats["idm_expert_accuracy"] = float((labels == true).float().mean())
+            stats.update(label_health(labels.numpy(), self.data.n_actions))
         self.labels = labels.numpy()
         stats["policy_loss"] = fit(
             self.policy, self.policy_opt, lambda idx: (self.expert_obs[self.expert_t[idx]],),
@@ -251,29 +240,35 @@ class BCOFamily(Method):
                      for c in range(self.data.n_actions)]  # fmt: skip
         return {"accuracy": float(hits.mean()), "class_accuracy": per_class}
 
-    def _train_idm_checked(self, max_epochs: int, iteration: int) -> dict[str, Any]:
-        """Train the IDM with early stopping; apply the dead-IDM rule (module docstring)."""
+    def _train_idm_checked(self, max_epochs: int) -> dict[str, Any]:
+        """Train the IDM with early stopping and measure its health, which never stops the
+        run (:mod:`abco_train.methods.bco.health`); with ``idm_reinit`` an IDM at chance is
+        re-initialised and trained once more."""
         loss, epochs = self._train_idm(max_epochs)
         health, reinitialised = self.validate_idm(), 0
-        if self._at_chance(health):
+        if self.options.idm_reinit and self._at_chance(health):
             self._new_idm()  # fresh weights from the run's torch generator, then once more
             loss, epochs = self._train_idm(max_epochs)
             health, reinitialised = self.validate_idm(), 1
-        stats = {"idm_loss": loss, "idm_epochs": epochs, "idm_val_accuracy": health["accuracy"],
-                 "idm_val_class_accuracy": health["class_accuracy"], "idm_chance": self.chance,
-                 "idm_reinitialised": reinitialised}  # fmt: skip
-        if self._at_chance(health):
-            raise TrainingFailed(
-                "idm_at_chance",
-                f"the IDM is at chance after re-initialisation (iteration {iteration}: held-out "
-                f"accuracy {health['accuracy']:.3f}, chance {self.chance:.3f}); its labels would"
-                " be one action for every expert pair, so the run stops without a result",
-                stats,
-            )
-        return stats
+        return {"idm_loss": loss, "idm_epochs": epochs, "idm_val_accuracy": health["accuracy"],
+                "idm_val_class_accuracy": health["class_accuracy"], "idm_chance": self.chance,
+                "idm_at_chance": self._at_chance(health), "idm_reinitialised": reinitialised,
+                "idm_train_accuracy": self._train_accuracy()}  # fmt: skip
 
     def _at_chance(self, health: dict[str, Any]) -> bool:
-        return len(self.val_t) >= MIN_JUDGED and health["accuracy"] < self.chance + DEAD_MARGIN
+        return at_chance(health["accuracy"], self.chance, len(self.val_t), MIN_JUDGED)
+
+    @torch.no_grad()
+    def _train_accuracy(self) -> float:
+        """The IDM's accuracy on its own ``I_s`` (``VALIDATION_CAP`` evenly spaced transitions
+        at most): one fitting the policy's runs may be at chance on random actions only."""
+        n = len(self.s_pre) + len(self.s_pos)
+        if n == 0:
+            return float("nan")
+        rows = torch.linspace(0, n - 1, min(n, VALIDATION_CAP)).long()
+        pairs, labels = self._idm_set()
+        pred = predict(self.idm, lambda idx: pairs(rows[idx]), len(rows), device=self.device)
+        return float((pred == labels[rows]).float().mean())
 
     def _new_idm(self) -> None:
         _, idm = build_networks(self.data.observation_space, self.data.n_actions,
@@ -303,6 +298,12 @@ class BCOFamily(Method):
 
     def _idm_epoch(self) -> float:
         """One cross-entropy epoch of the IDM over ``I_s = I_pre[s_pre] + I_pos[s_pos]``."""
+        pairs, labels = self._idm_set()
+        return fit(self.idm, self.idm_opt, pairs, labels, 1, _resolved(self.config.batch_size),
+                    self.rng, "IDM", self.config.quiet, self.device, self.augment)  # fmt: skip
+
+    def _idm_set(self) -> tuple[Any, torch.Tensor]:
+        """``I_s``: its minibatch function (indices -> ``(s, s')``) and its action labels."""
         n_pre = len(self.s_pre)
         labels = torch.cat([self.pre_actions[self.s_pre], self.pos_actions[self.s_pos]])
 
@@ -319,8 +320,7 @@ class BCOFamily(Method):
             s[~is_pre], s1[~is_pre] = self.pos_obs[rows], self.pos_obs[rows + 1]
             return s, s1
 
-        return fit(self.idm, self.idm_opt, pairs, labels, 1, _resolved(self.config.batch_size),
-                    self.rng, "IDM", self.config.quiet, self.device, self.augment)  # fmt: skip
+        return pairs, labels
 
     # -- post-demonstrations and the next I_s --------------------------------------------------
 

@@ -62,6 +62,9 @@ class BCOOptions(MethodOptions):
     idm_patience: int | None = option("stop the IDM's epochs after this many without a better "
                                       "validation accuracy (the best weights are kept)",
                                       min=1, max=MAX_EPOCHS)
+    idm_reinit: bool = option("re-initialise an IDM found at chance after training and train "
+                              "it once more (off: Algorithm 1 never re-initialises; the run "
+                              "goes on either way)", False)
     idm_validation: int | None = option("pre-demonstration transitions held out to measure "
                                         "the IDM (default: 10%, at most 2,000)",
                                         min=1, max=MAX_PRE_TRANSITIONS)
