@@ -99,7 +99,10 @@ def test_a_folder_from_before_the_options_moved_is_still_recognised(tmp_path: Pa
     old = {k: v for k, v in asdict(new).items() if k != "method_options"}
     old.update(new.method_options)  # the settings stood at the top level then
     old["method_options"] = {}
-    assert set(new.method_options) == set(MOVED_TO_METHOD_OPTIONS)
+    # the moved settings, and options added since (idm_reinit), which old folders lack
+    assert set(new.method_options) - set(MOVED_TO_METHOD_OPTIONS) == {"idm_reinit"}
+    assert set(MOVED_TO_METHOD_OPTIONS) <= set(new.method_options)
+    old.pop("idm_reinit")
     (tmp_path / "config.json").write_text(json.dumps(old))
     final = {"env": "CartPole-v1", "method": "bco", "seed": 0, "status": "ok",
              "episodes": {"performance": 1.0, "aer": 500.0, "success_rate": 1.0, "episodes": 5}}
