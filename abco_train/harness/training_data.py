@@ -59,6 +59,11 @@ def looks_like_path(ref: str) -> bool:
             or ref.count("/") > 1 or os.sep in ref.replace("/", ""))
 
 
+def _no_such_file(ref: str | None) -> bool:
+    """Whether a dataset argument is a path (:func:`looks_like_path`) that names no file."""
+    return ref is not None and looks_like_path(ref) and not Path(ref).is_file()
+
+
 def check_dataset_paths(config: RunConfig) -> None:
     """Refuse a ``--expert-data``/``--pre-data`` path that names no file, before a run touches
     its folder.
@@ -67,7 +72,7 @@ def check_dataset_paths(config: RunConfig) -> None:
         DatasetFileNotFoundError: ``no such file: PATH``, naming the option.
     """
     for flag, ref in (("--expert-data", config.expert_data), ("--pre-data", config.pre_data)):
-        if ref is not None and looks_like_path(ref) and not Path(ref).is_file():
+        if _no_such_file(ref):
             raise DatasetFileNotFoundError(f"{flag}: no such file: {ref}")
 
 
@@ -96,7 +101,7 @@ def resolve_dataset(
         abco_data.DatasetError: The file or id is unusable (missing, damaged, another kind or
             environment, a checksum mismatch, non-finite values); the message names it.
     """
-    if ref is not None and looks_like_path(ref) and not Path(ref).is_file():
+    if _no_such_file(ref):
         raise DatasetFileNotFoundError(f"no such file: {ref}")
     if ref is not None and (Path(ref).is_file() or abco_data.is_user_id(ref)):
         # A file given by hand, or a user dataset's (its bytes checked against the user
