@@ -41,7 +41,8 @@ from abco_data.format import ACTIONS, FileIdentity, LazyH5File, ObservationReade
 from abco_data.format.arrays import DatasetArrays, MazeFrames
 from abco_data.format.validation import check_observations
 
-__all__ = ["TransitionDataset", "TransitionSource", "FrameTensor", "frames_tensor"]
+__all__ = ["TransitionDataset", "TransitionSource", "FrameTensor", "DeviceFrameTensor",
+           "frames_tensor"]
 
 
 class TransitionSource(Protocol):
@@ -183,9 +184,70 @@ class FrameTensor:
         return torch.from_numpy(self.frames[rows])
 
 
-def frames_tensor(observations: np.ndarray | MazeFrames) -> torch.Tensor | FrameTensor:
+class DeviceFrameTensor:
+    """:class:`~abco_data.format.arrays.MazeFrames` resident on a torch device, drawn there.
+
+    What draws the frames (one background per layout, each row's background and agent cell,
+    the dot's bytes) is moved to ``device`` once; ``view[rows]`` gathers the backgrounds and
+    writes the dots on that device, so a GPU's minibatches never cross the bus as frames.
+    Byte for byte the frames :class:`FrameTensor` draws.
+
+    Example:
+        >>> cells = np.full((1, 3, 3), 15, np.uint8)
+        >>> frames, = MazeFrames.draw_columns([(cells, np.array([1]), np.array([[0, 0],
+        ...     [0, 1]]))], height=6, width=6)
+        >>> view = DeviceFrameTensor(frames, torch.device("cpu"))
+        >>> rows = torch.tensor([1, 0, 1])
+        >>> bool(torch.equal(view[rows], FrameTensor(frames)[rows]))
+        True
+    """
+
+    def __init__(self, frames: MazeFrames, device: torch.device) -> None:
+        self.device = device
+        self._shape = torch.Size(frames.shape)
+        self.backgrounds = torch.from_numpy(frames.backgrounds).to(device)
+        self.background_of_row = torch.from_numpy(frames.background_of_row).long().to(device)
+        self.cell_of_row = torch.from_numpy(frames.cell_of_row).long().to(device)
+        self.dot_bytes = torch.from_numpy(frames.dot_bytes).long().to(device)
+        self.dot_colour = torch.from_numpy(frames.dot_colour).to(device)
+
+    @property
+    def shape(self) -> torch.Size:
+        """``(N, H, W, 3)``."""
+        return self._shape
+
+    @property
+    def dtype(self) -> torch.dtype:
+        """``torch.uint8``."""
+        return torch.uint8
+
+    def __len__(self) -> int:
+        return self._shape[0]
+
+    def __getitem__(self, rows: torch.Tensor | np.ndarray | int) -> torch.Tensor:
+        index = torch.as_tensor(rows).to(self.device, torch.long)
+        flat_rows = index.reshape(-1)
+        out = self.backgrounds[self.background_of_row[flat_rows]]  # a gather: a new tensor
+        if out.numel():
+            dots = self.dot_bytes[self.cell_of_row[flat_rows]]
+            out.view(len(flat_rows), -1).scatter_(
+                1, dots, self.dot_colour.expand(len(flat_rows), -1))
+        return out.reshape(*index.shape, *self._shape[1:])
+
+
+def frames_tensor(observations: np.ndarray | MazeFrames, device: torch.device | str | None = None
+                  ) -> torch.Tensor | FrameTensor | DeviceFrameTensor:  # fmt: skip
     """An observation column for indexing with tensors of rows: an array's tensor (sharing
-    its memory) or, for :class:`~abco_data.format.arrays.MazeFrames`, a :class:`FrameTensor`."""
+    its memory) or, for :class:`~abco_data.format.arrays.MazeFrames`, a :class:`FrameTensor`.
+
+    With an accelerator ``device`` (not the CPU) the column is moved there once, whole: a
+    tensor on it, or a :class:`DeviceFrameTensor` that draws maze frames on it.
+    """
+    device = torch.device(device) if device is not None else None
+    if device is not None and device.type != "cpu":
+        if isinstance(observations, MazeFrames):
+            return DeviceFrameTensor(observations, device)
+        return torch.from_numpy(observations).to(device)
     if isinstance(observations, MazeFrames):
         return FrameTensor(observations)
     return torch.from_numpy(observations)

@@ -28,7 +28,7 @@ EXPECTED = {
     "bench_phases.py": ["wall s", "data", "pairs", "idm", "policy", "rollouts", "evaluation",
                         "references", "records", "cartpole-authors-data       bco",
                         "share of the wall time"],
-    "bench_gpu.py": ["CUDA device:", "cpu arm: exit 0", "x cpu/cuda",
+    "bench_gpu.py": ["CUDA device:", "cpu arm: exit 0", "x cpu/auto",
                      "cartpole-authors-data       bc"],
     "bench_train.py": ["env", "method", "result", "AbcoMaze3x3-v0     abco       P=",
                        "CartPole-v1        abco       P="],

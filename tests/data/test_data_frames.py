@@ -10,7 +10,7 @@ from abco_data.format.arrays import MazeFrames
 from abco_envs.maze.render import MazeRenderer
 
 torch = pytest.importorskip("torch")
-from abco_data.torch_view import FrameTensor, frames_tensor  # noqa: E402
+from abco_data.torch_view import DeviceFrameTensor, FrameTensor, frames_tensor  # noqa: E402
 
 
 def _drawn(*datasets):
@@ -76,6 +76,25 @@ def test_frames_tensor_gives_the_tensors_of_the_decoded_column(mazes):
         assert new.dtype == old[key].dtype and torch.equal(new, old[key])
     plain = frames_tensor(decoded)  # an array: its tensor, sharing its memory
     assert isinstance(plain, torch.Tensor) and plain.data_ptr() == decoded.ctypes.data
+
+
+def test_device_frames_are_drawn_where_they_live_byte_for_byte(mazes):
+    """The device view (here on the CPU, the one device every machine has) draws each row as
+    the decoded column holds it, for every kind of row index a trainer passes."""
+    (frames, _), (decoded, _) = _drawn(*mazes)
+    view, old = DeviceFrameTensor(frames, torch.device("cpu")), torch.from_numpy(decoded)
+    assert view.shape == old.shape and view.dtype == torch.uint8 and len(view) == len(old)
+    rows = torch.tensor([4, 1, 1, len(old) - 2])
+    for key in (rows, rows + 1, torch.tensor(3), rows.numpy(), 2, rows.reshape(2, 2)):
+        assert torch.equal(view[key], old[key]), key
+    assert view[torch.zeros(0, dtype=torch.long)].shape == (0, *old.shape[1:])
+    changed = view[rows]
+    changed[0] ^= 1  # a drawn batch is its own memory: the next draw is untouched
+    assert torch.equal(view[rows], old[rows])
+    # an accelerator's device gets the device view, the CPU keeps the numpy one
+    assert isinstance(frames_tensor(frames, "cpu"), FrameTensor)
+    assert isinstance(frames_tensor(frames, torch.device("meta")), DeviceFrameTensor)
+    assert frames_tensor(decoded, "meta").device.type == "meta"
 
 
 def test_first_difference_finds_the_first_changed_row(mazes):

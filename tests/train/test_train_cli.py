@@ -177,9 +177,12 @@ def test_cuda_without_a_gpu_is_refused(tmp_path, capsys) -> None:
 
 @pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
-@pytest.mark.parametrize("env", ["CartPole-v1", "AbcoMaze3x3-v0"])
-def test_cuda_run_resumes_and_loads_on_cpu(tiny_data, tmp_path, env) -> None:
-    cfg = tiny_config(env, "abco", tiny_data, tmp_path / "gpu", device="cuda")
+@pytest.mark.parametrize("env, method", [("CartPole-v1", "abco"), ("AbcoMaze3x3-v0", "abco"),
+                                         ("AbcoMaze3x3-v0", "bco-alpha-torabi")])
+def test_cuda_run_resumes_and_loads_on_cpu(tiny_data, tmp_path, env, method) -> None:
+    """On a GPU the training data lives there (a maze's frames drawn there); a stopped run
+    resumes from its checkpoint, and the policy loads on the CPU."""
+    cfg = tiny_config(env, method, tiny_data, tmp_path / "gpu", device="cuda")
     assert train(cfg, stop_after=1) is None
     final = train(cfg)  # resumes from a checkpoint holding CUDA tensors
     assert json.loads((tmp_path / "gpu" / "config.json").read_text())["device"] == "cuda"

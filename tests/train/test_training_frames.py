@@ -18,11 +18,12 @@ from train_testing import tiny_config
 
 import abco_data
 from abco_data.format.arrays import MazeFrames
-from abco_data.torch_view import frames_tensor
+from abco_data.torch_view import DeviceFrameTensor, frames_tensor
 from abco_train.harness import loop
 from abco_train.harness import training_data as training_data_module
 from abco_train.harness.loop import train
 from abco_train.harness.training_data import TrainingData, load_training_data
+from abco_train.methods.bco import family
 from abco_train.methods.registry import get_method
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -82,6 +83,12 @@ def test_runs_end_as_with_decoded_frames(method, tiny_data, tmp_path, monkeypatc
                 .read_text().splitlines()] for run in ("drawn", "decoded")]  # fmt: skip
     assert metrics[0] == metrics[1]
     assert ("idm_loss" in json.dumps(metrics)) == (method != "bc")  # the IDM's losses compared
+    # frames drawn by the device view, as on a GPU (the view here on the CPU): the same run
+    monkeypatch.setattr(loop, "load_training_data", load_training_data)
+    monkeypatch.setattr(family, "frames_tensor", lambda obs, device: DeviceFrameTensor(
+        obs, torch.device("cpu")) if isinstance(obs, MazeFrames) else frames_tensor(obs))
+    on_device = train(dataclasses.replace(cfg, run_dir=str(tmp_path / "device")))
+    assert without_times(on_device) == without_times(drawn)
 
 
 def test_minibatches_are_the_decoded_ones(tiny_data, tmp_path):

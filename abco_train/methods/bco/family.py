@@ -126,14 +126,15 @@ class BCOFamily(Method):
             data.observation_space, data.n_actions, config.arch, bool(config.attention),
             _resolved(self.options.idm_input), **stats,
         )
-        # Networks live on the run's device; the data stays in CPU memory and travels to the
-        # device one batch at a time (a maze's frames need not fit in GPU memory).
+        # Networks and observations live on the run's device: on a GPU the frames (a maze's
+        # as what draws them, a few bytes a row) move there once and minibatches are gathered
+        # there. Indices and labels stay in CPU memory, where the sampling draws them.
         self.device = torch.device(config.device)
         self.policy, self.idm = self.policy.to(self.device), self.idm.to(self.device)
         self.policy_opt = torch.optim.Adam(self.policy.parameters(), lr=_resolved(config.lr))
         self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=_resolved(config.lr))
         # -- data as torch tensors (no copies) ------------------------------------------------
-        self.pre_obs = frames_tensor(data.pre_obs)
+        self.pre_obs = frames_tensor(data.pre_obs, self.device)
         if self.idm_data is None:  # BC has no IDM to measure
             keep, held = np.arange(len(pre_t)), np.zeros(0, dtype=np.int64)
         else:
@@ -146,10 +147,11 @@ class BCOFamily(Method):
         self.val_actions = torch.from_numpy(pre_actions[held])
         shares = np.bincount(pre_actions[held], minlength=data.n_actions) / max(len(held), 1)
         self.chance = float(shares.max())
-        self.expert_obs = frames_tensor(data.expert_obs)
+        self.expert_obs = frames_tensor(data.expert_obs, self.device)
         self.expert_t = torch.from_numpy(data.expert_t)
         # -- I_pos (accumulated post-demonstrations) and the current I_s ----------------------
-        self.pos_obs = torch.zeros((0, *data.pre_obs.shape[1:]), dtype=self.pre_obs.dtype)
+        self.pos_obs = torch.zeros((0, *data.pre_obs.shape[1:]), dtype=self.pre_obs.dtype,
+                                   device=self.device)
         self.pos_t = torch.zeros(0, dtype=torch.long)
         self.pos_actions = torch.zeros(0, dtype=torch.long)
         self.pos_runs = np.zeros(0, dtype=np.int64)
@@ -312,7 +314,8 @@ class BCOFamily(Method):
                 rows = self.pre_t[self.s_pre[idx]]
                 return self.pre_obs[rows], self.pre_obs[rows + 1]
             is_pre = idx < n_pre
-            s = torch.empty((len(idx), *self.pre_obs.shape[1:]), dtype=self.pre_obs.dtype)
+            s = torch.empty((len(idx), *self.pre_obs.shape[1:]), dtype=self.pre_obs.dtype,
+                            device=self.device)
             s1 = torch.empty_like(s)
             rows = self.pre_t[self.s_pre[idx[is_pre]]]
             s[is_pre], s1[is_pre] = self.pre_obs[rows], self.pre_obs[rows + 1]
@@ -346,7 +349,7 @@ class BCOFamily(Method):
             obs_rows = np.unique(np.concatenate([rollouts.obs_t[sel], rollouts.obs_t[sel] + 1]))
             remap = np.full(len(rollouts.observations), -1, dtype=np.int64)
             remap[obs_rows] = np.arange(len(obs_rows)) + len(self.pos_obs)
-            new_obs = torch.from_numpy(rollouts.observations[obs_rows])
+            new_obs = torch.from_numpy(rollouts.observations[obs_rows]).to(self.device)
             self.pos_obs = torch.cat([self.pos_obs, new_obs])
             self.pos_t = torch.cat([self.pos_t, torch.from_numpy(remap[rollouts.obs_t[sel]])])
             new_actions = torch.from_numpy(rollouts.actions[sel])

@@ -43,7 +43,7 @@ def transpose_batch(frames: list[torch.Tensor], labels: torch.Tensor, rng: np.ra
         x[flip] = x[flip].transpose(1, 2)
         out.append(x)
     labels = labels.clone()
-    labels[flip] = TRANSPOSED_ACTIONS[labels[flip]]
+    labels[flip] = TRANSPOSED_ACTIONS.to(labels.device)[labels[flip]]
     return out, labels
 
 
@@ -61,8 +61,8 @@ def fit(
     augment: bool = False,
     max_batches: int | None = None,
 ) -> float:
-    """Cross-entropy epochs over ``labels``; ``inputs(idx) -> args of net`` (CPU tensors,
-    moved batch by batch to ``device``); ``augment``: :func:`transpose_batch` on each
+    """Cross-entropy epochs over ``labels``; ``inputs(idx) -> args of net`` (tensors on
+    ``device`` already, or moved there batch by batch); ``augment``: :func:`transpose_batch` on each
     minibatch; ``max_batches``: stop after that many updates. Mean loss of the last epoch."""
     from tqdm.auto import tqdm
 
