@@ -77,8 +77,17 @@ class Rollouts:
 
     @property
     def win_rate(self) -> float:
-        """``P(g | E)``."""
-        return float(self.successes.mean()) if len(self.successes) else 0.0
+        """``P(g | E)`` over the runs that ended on their own: a run the budget cut
+        unfinished says nothing of the policy's chance to reach the goal (0 if none ended).
+
+        Example:
+            >>> runs = Rollouts(returns=np.zeros(4), successes=np.array([1, 0, 0, 0], bool),
+            ...                 lengths=np.ones(4), budget_cut=np.array([0, 0, 1, 1], bool))
+            >>> runs.win_rate
+            0.5
+        """
+        ended = self.successes if self.budget_cut is None else self.successes[~self.budget_cut]
+        return float(ended.mean()) if len(ended) else 0.0
 
 
 def make_vector_env(env_id: str, num_envs: int, env_kwargs: dict[str, Any]) -> gym.vector.VectorEnv:

@@ -27,6 +27,8 @@ BUILTIN_MODULES = (
     "abco_train.methods.iupe",
     "abco_train.methods.ilpo.method",
     "abco_train.methods.gaifo.method",
+    "abco_train.methods.dilo.method",
+    "abco_train.methods.lapo.method",
     "abco_train.methods.reference",
 )
 
@@ -85,11 +87,14 @@ def builtin_options() -> dict[str, type[MethodOptions]]:
     """The options class of each built-in method, read without importing torch (the command
     line builds its flags from them)."""
     from abco_train.methods.bco.options import VARIANTS, BCOOptions
+    from abco_train.methods.dilo.options import DILOOptions
     from abco_train.methods.gaifo.options import GAIfOOptions
     from abco_train.methods.ilpo.options import ILPOOptions
+    from abco_train.methods.lapo.options import LAPOOptions
 
     return {**dict.fromkeys(VARIANTS, BCOOptions), "iupe": BCOOptions, "ilpo": ILPOOptions,
-            "gaifo": GAIfOOptions, "random": MethodOptions, "expert": MethodOptions}  # fmt: skip
+            "gaifo": GAIfOOptions, "dilo": DILOOptions, "lapo": LAPOOptions,
+            "random": MethodOptions, "expert": MethodOptions}  # fmt: skip
 
 
 def options_class(name: str) -> type[MethodOptions]:

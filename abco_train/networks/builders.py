@@ -31,7 +31,7 @@ from abco_train.networks.encoders import CompactCNN, ResNet18, VectorEncoder
 from abco_train.networks.heads import IDMNet, PolicyNet, action_head, small_head
 
 __all__ = ["NetworkSpec", "BUILDERS", "build_networks", "default_arch", "image_statistics",
-           "frame_statistics", "MAX_STATISTICS_ROWS"]
+           "frame_statistics", "data_statistics", "MAX_STATISTICS_ROWS"]
 
 #: The most frames :func:`image_statistics` reads (evenly spaced over the data).
 MAX_STATISTICS_ROWS = 20_000
@@ -164,6 +164,29 @@ def frame_statistics(env_id: str, frames: Any, obs_t: np.ndarray) -> dict[str, A
     if abco_envs.is_maze(env_id):
         return {"grid": abco_envs.maze_size(env_id)}
     return image_statistics(np.asarray(frames), obs_t)
+
+
+def data_statistics(env_id: str, pre_obs: Any, pre_t: np.ndarray, part: bool = False
+                    ) -> dict[str, Any]:  # fmt: skip
+    """:func:`build_networks`' statistics keywords from the pre-demonstrations a run trains on.
+
+    Vector states: the mean and std of the states and of ``s_t+1 - s_t`` over the transitions
+    ``pre_t`` (``part``: only the states of those transitions, the ones a ``--budget`` paid
+    for; else every row). Frames: :func:`frame_statistics`.
+
+    Example:
+        >>> obs = np.array([[0.0], [1.0], [3.0]])
+        >>> stats = data_statistics("CartPole-v1", obs, np.array([0, 1]))
+        >>> {k: v.round(3).tolist() for k, v in stats.items()}  # doctest: +NORMALIZE_WHITESPACE
+        {'obs_mean': [1.333], 'obs_std': [1.247], 'delta_mean': [1.5], 'delta_std': [0.5]}
+    """
+    if len(pre_obs.shape) != 2:  # frames: a maze's grid (cell by cell), another env's channels
+        return frame_statistics(env_id, pre_obs, pre_t)
+    rows = np.unique(np.concatenate([pre_t, pre_t + 1])) if part else slice(None)
+    states = pre_obs[rows].astype(np.float64)
+    deltas = pre_obs[pre_t + 1].astype(np.float64) - pre_obs[pre_t]
+    return {"obs_mean": states.mean(0), "obs_std": states.std(0),
+            "delta_mean": deltas.mean(0), "delta_std": deltas.std(0)}  # fmt: skip
 
 
 def _compact_networks(spec: NetworkSpec) -> tuple[PolicyNet, IDMNet]:

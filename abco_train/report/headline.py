@@ -41,7 +41,8 @@ __all__ = ["IFO_METHODS", "TRUE_ACTION_METHODS", "REFERENCE_METHODS", "HEADLINE_
            "task_cells", "role", "overview_table", "task_table", "intro"]  # fmt: skip
 
 #: The IfO methods of the benchmark: the aggregates and the pairwise comparisons are theirs.
-IFO_METHODS = ("bco", "bco-alpha", "bco-alpha-torabi", "abco", "iupe", "ilpo", "gaifo")
+IFO_METHODS = ("bco", "bco-alpha", "bco-alpha-torabi", "abco", "iupe", "ilpo", "gaifo", "dilo",
+               "lapo")
 #: Methods that train on the expert's true actions: labelled references, outside the aggregates.
 TRUE_ACTION_METHODS = ("bc",)
 #: The ends of the score's scale, run through the same evaluation: a row in every task's table.

@@ -62,10 +62,10 @@ TABLE2_METHODS = {
 }  # fmt: skip
 TABLE2_ENV = "AbcoMaze5x5-v0"
 #: The built-ins in the tables' order; any other method follows, alphabetically.
-ORDER = ("bc", "bco", "bco-alpha", "bco-alpha-torabi", "abco", "iupe", "ilpo", "gaifo",
-         "attention", "sampling-partial", "sampling-whole", "abco-whole")  # fmt: skip
+ORDER = ("bc", "bco", "bco-alpha", "bco-alpha-torabi", "abco", "iupe", "ilpo", "gaifo", "dilo",
+         "lapo", "attention", "sampling-partial", "sampling-whole", "abco-whole")  # fmt: skip
 #: Labels of the main table (a method without one is shown by its name).
-LABELS = {**TABLE2_METHODS, **TABLE1_METHODS}
+LABELS = {**TABLE2_METHODS, **TABLE1_METHODS, "dilo": "DILO", "lapo": "LAPO"}
 
 #: The issue's goals (mean over seeds): ABCO's AER >= the paper's and P >= 0.95; IUPE and
 #: ILPO at or above their published AER; the seven-method grid within 4 h of wall time.

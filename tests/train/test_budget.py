@@ -3,6 +3,7 @@ binds stops training (and says so), a method that counts past it fails, none cha
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -229,5 +230,9 @@ def test_rollout_stops_its_batch_at_max_total_steps():
     assert (cut.lengths <= whole.lengths).all()
     assert cut.actions is not None and len(cut.actions) == 10  # what is recorded is counted
     assert cut.observations is not None and len(cut.observations) == 10 + 4
+    # the win rate counts only the runs that ended on their own
+    one_ended = dataclasses.replace(cut, budget_cut=np.array([False, True, True, True]),
+                                    successes=np.array([True, False, False, False]))
+    assert one_ended.win_rate == 1.0 and cut.win_rate == 0.0  # none of cut's ended
     with pytest.raises(ValueError, match="max_total_steps"):
         rollout(_turn_left, CARTPOLE, episodes=2, max_total_steps=0)

@@ -76,3 +76,21 @@ def test_every_idm_method_learns_the_corridor_with_its_defaults(recorded, tmp_pa
                       "--run-dir", str(run_dir), "--quiet", "--no-plots"]) == 0  # fmt: skip
     final = json.loads((run_dir / "final.json").read_text())
     assert final["status"] == "ok" and final["episodes"]["score"] >= 0.95, final["episodes"]
+
+
+@pytest.mark.parametrize("method, steps", [("dilo", ["--dilo-steps", "40"]),
+                                           ("lapo", ["--lapo-model-steps", "40",
+                                                     "--lapo-policy-steps", "40"])])
+def test_the_offline_methods_run_on_the_recorded_corridor(recorded, tmp_path, method, steps,
+                                                          monkeypatch):  # fmt: skip
+    """DILO and LAPO end to end on a user's recorded env (few steps: that they run, count
+    the user's pre-demonstrations and score; their defaults' scores are measured elsewhere)."""
+    monkeypatch.syspath_prepend(str(recorded))
+    monkeypatch.setenv("ABCO_DATA_HOME", str(recorded / "home"))
+    run_dir = tmp_path / method
+    assert abco_main(["train", "--env", ENV, "--method", method, "--expert-data",
+                      "local/corridor10-expert-v0", "--pre-data", "local/corridor10-pre-v0",
+                      "--run-dir", str(run_dir), "--quiet", "--no-plots", *steps]) == 0
+    final = json.loads((run_dir / "final.json").read_text())
+    assert final["status"] == "ok" and -1.5 < final["episodes"]["score"] <= 1.5
+    assert final["interactions"]["pre_demonstration"] == 3000

@@ -70,7 +70,7 @@ from abco_train.methods.bco.health import DEAD_MARGIN, MIN_JUDGED, at_chance, la
 from abco_train.methods.bco.options import VARIANTS, BCOOptions
 from abco_train.methods.bco.sampling import sample_training_set
 from abco_train.methods.registry import register
-from abco_train.networks.builders import build_networks, frame_statistics
+from abco_train.networks.builders import build_networks, data_statistics
 
 __all__ = ["VARIANTS", "BCOFamily", "DEAD_MARGIN", "MIN_JUDGED"]
 
@@ -110,16 +110,7 @@ class BCOFamily(Method):
         paid = self.budget_left if self.idm_data is not None else None  # None: all of them
         pre_t, pre_actions = data.pre_t[:paid], data.pre_actions[:paid]
         # -- networks (mean/std of the states standardise vector inputs) ----------------------
-        stats: dict[str, Any] = {}
-        if len(data.observation_space.shape) == 1:
-            rows = (np.unique(np.concatenate([pre_t, pre_t + 1]))
-                    if len(pre_t) < len(data.pre_t) else slice(None))  # only what it paid for
-            states = data.pre_obs[rows].astype(np.float64)
-            deltas = data.pre_obs[pre_t + 1].astype(np.float64) - data.pre_obs[pre_t]
-            stats = {"obs_mean": states.mean(0), "obs_std": states.std(0),
-                     "delta_mean": deltas.mean(0), "delta_std": deltas.std(0)}  # fmt: skip
-        else:  # frames: a maze's grid (the cellnet reads it cell by cell), another env's
-            stats = frame_statistics(config.env, data.pre_obs, pre_t)  # channel statistics
+        stats = data_statistics(config.env, data.pre_obs, pre_t, len(pre_t) < len(data.pre_t))
         self.net_stats = stats
         self.augment = self.options.augment == "transpose"
         self.policy, self.idm = build_networks(

@@ -1,0 +1,1 @@
+"""DILO (:mod:`abco_train.methods.dilo.method`) and its options."""

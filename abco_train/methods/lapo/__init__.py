@@ -1,0 +1,1 @@
+"""LAPO (:mod:`abco_train.methods.lapo.method`), its networks and its options."""

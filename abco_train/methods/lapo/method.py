@@ -1,0 +1,275 @@
+"""LAPO: Learning to Act without Actions (Schmidt and Jiang, ICLR 2024).
+
+LAPO learns what the actions are from observations alone: a latent inverse dynamics model
+infers a latent action from each transition, a forward model must predict the transition
+from the state and that latent, and a vector-quantised bottleneck between them keeps the
+latent from copying the next state, so it can only say what changed, the action's effect.
+A policy then clones the expert in latent space, and a small decoder, learnt from a few
+action-labelled transitions, turns latents into actions. Where each stage lives here (the
+losses are those of the authors' code, ``stage1_idm.py``, ``stage2_bc.py``, ``lapo/models.py``):
+
+* **Stage 1, latent IDM and forward model** (:meth:`LAPO._model_step`):
+  ``z = IDM(s, s')``, ``q = VQ(z)`` (:class:`~abco_train.methods.lapo.networks.
+  VectorQuantiser`: EMA codebooks, commitment loss, straight-through gradients), and
+
+      L_1 = || f(s, q) - target(s, s') ||^2 + commitment * || z - sg(q) ||^2
+
+  trained jointly (the forward model's gradient reaches the IDM through ``q``), gradients
+  clipped at ``grad_clip``. Data: observations only: the expert's transitions and the
+  pre-demonstrations' (their actions unread), half a minibatch each. The authors' IDM also
+  reads the frame before ``s`` and their forward model predicts the next frame's pixels with a
+  U-Net; here the IDM is the run's IDM network on ``(s, s')`` (every abco env is Markov in its
+  observation) and the forward model predicts ``s' - s`` standardised, or a maze frame's
+  pooled difference (:class:`~abco_train.methods.lapo.networks.ForwardModel`).
+* **Stage 2, latent behaviour cloning** (:meth:`LAPO._policy_step`): ``pi(s)``, the run's
+  policy network with ``latent_dim`` outputs, regresses the IDM's continuous (pre-quantisation)
+  latent of each expert transition, ``|| pi(s) - sg(z) ||^2``, the IDM frozen.
+* **Stage 3, decoding, offline** (:meth:`LAPO._fit_decoder`): an MLP decoder ``d(a | z)`` is
+  fitted by cross-entropy (label smoothing) on the pre-demonstrations' IDM latents and true
+  actions, the small action-labelled set of the paper's offline variant; the agent acts
+  ``argmax_a d(a | pi(s))``. The paper's online variant (PPO fine-tuning) is not run: every
+  method here gets the same data and no reinforcement-learning steps but GAIfO's, whose
+  method needs them.
+
+Schedule: iteration 0 runs stage 1 (``model_steps``) and the decoder; stage 2's
+``policy_steps`` are spread evenly over the run's iterations, each then evaluated.
+
+Interactions: the pre-demonstration transitions it trains on (with a ``--budget``, the first
+ones it pays for), nothing online.
+
+Diagnostics: ``probe_accuracy``, a linear probe's held-out accuracy at telling the true action
+of a pre-demonstration from its latent (:func:`~abco_train.methods.lapo.networks.
+linear_probe_accuracy`; the authors probe with an MLP): whether stage 1 found the actions;
+``codes_used``, the distinct code tuples the expert's transitions get; the losses.
+
+Options: :class:`~abco_train.methods.lapo.options.LAPOOptions` (``--lapo-model-steps``, ...).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from abco_train.config.run import RunConfig
+from abco_train.harness.training_data import TrainingData
+from abco_train.methods.base import Method
+from abco_train.methods.lapo.networks import (
+    ForwardModel,
+    VectorQuantiser,
+    decoder,
+    linear_probe_accuracy,
+)
+from abco_train.methods.lapo.options import LAPOOptions
+from abco_train.methods.offline import (
+    iteration_steps,
+    offline_data,
+    state_network,
+    transition_network,
+)
+from abco_train.methods.registry import register
+
+__all__ = ["LAPO", "LAPOOptions"]
+
+#: The most transitions the probe and the decoder read latents of at once.
+CHUNK = 1024
+
+
+@register("lapo")
+class LAPO(Method):
+    """LAPO (see the module docstring): latent actions, latent cloning, a decoder."""
+
+    Options = LAPOOptions
+    options: LAPOOptions
+
+    def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
+        super().__init__(config, data, rng)
+        opts = self.options
+        self.device = torch.device(config.device)
+        self.data_t = offline_data(self, data, self.device)
+        stats, width = self.data_t.stats, opts.latent_dim
+        self.frames = len(data.observation_space.shape) == 3
+        self.target_scale = self._target_scale()
+        out = self._target(*self.data_t.expert_pairs(torch.arange(1))).shape[1]
+        self.idm = transition_network(config, data, stats, width).to(self.device)
+        self.vq = VectorQuantiser(opts.codebooks, opts.slots, opts.code_dim, opts.codes,
+                                  opts.commitment, opts.ema_decay).to(self.device)  # fmt: skip
+        encoder = state_network(config, data, stats, opts.hidden)
+        self.fdm = ForwardModel(encoder, opts.hidden, width, opts.hidden, out).to(self.device)
+        self.policy = state_network(config, data, stats, width).to(self.device)
+        self.decoder = decoder(width, opts.hidden, data.n_actions).to(self.device)
+        self.model_opt = torch.optim.Adam([*self.idm.parameters(), *self.fdm.parameters()],
+                                          lr=opts.model_lr)  # fmt: skip
+        self.policy_opt = torch.optim.Adam(self.policy.parameters(), lr=opts.policy_lr)
+        self.decoder_opt = torch.optim.Adam(self.decoder.parameters())
+        self.stats: dict[str, float] = {}
+
+    # -- the forward model's target -------------------------------------------------------------
+
+    def _raw_target(self, s: torch.Tensor, s1: torch.Tensor) -> torch.Tensor:
+        """``s' - s`` (vectors) or its ``pool``-averaged difference image in ``[-1, 1]``."""
+        if not self.frames:
+            return s1.float() - s.float()
+        d = (s1.float() - s.float()).div_(255.0).permute(0, 3, 1, 2)
+        if self.options.pool > 1:
+            d = F.avg_pool2d(d, self.options.pool)
+        return d.flatten(1)
+
+    @torch.no_grad()
+    def _target_scale(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """Mean and std of the target over the pre-demonstrations (frames: zero and the RMS)."""
+        n = len(self.data_t.pre_t)
+        rows = torch.linspace(0, n - 1, min(n, 4 * CHUNK)).long()
+        raw = self._raw_target(*self.data_t.pre_pairs(rows))
+        if self.frames:
+            return torch.zeros(()), raw.pow(2).mean().sqrt().clamp_min(1e-8)
+        return raw.mean(0), raw.std(0).clamp_min(1e-6)
+
+    def _target(self, s: torch.Tensor, s1: torch.Tensor) -> torch.Tensor:
+        mean, std = self.target_scale
+        return (self._raw_target(s, s1) - mean) / std
+
+    # -- stage 1: latent IDM and forward model ----------------------------------------------------
+
+    def _model_step(self, batch: int) -> tuple[float, float]:
+        """One Adam step of ``L_1`` on half expert, half pre-demonstration transitions."""
+        half = max(1, batch // 2)
+        e = torch.from_numpy(self.rng.integers(0, len(self.data_t.expert_t), half))
+        p = torch.from_numpy(self.rng.integers(0, len(self.data_t.pre_t), batch - half))
+        (es, es1), (ps, ps1) = self.data_t.expert_pairs(e), self.data_t.pre_pairs(p)
+        s, s1 = torch.cat([es, ps]), torch.cat([es1, ps1])
+        q, commitment, _ = self.vq(self.idm(s, s1))
+        prediction = F.mse_loss(self.fdm(s, q), self._target(s, s1))
+        loss = prediction + commitment
+        self.model_opt.zero_grad(set_to_none=True)
+        loss.backward()
+        params = [*self.idm.parameters(), *self.fdm.parameters()]
+        torch.nn.utils.clip_grad_norm_(params, self.options.grad_clip)
+        self.model_opt.step()
+        return float(prediction.detach()), float(commitment.detach())
+
+    @torch.no_grad()
+    def latents(self, pairs: Any, n: int) -> torch.Tensor:
+        """The IDM's continuous latents of ``n`` transitions (``pairs(idx) -> (s, s')``)."""
+        self.idm.eval()
+        out = [self.idm(*pairs(torch.arange(i, min(i + CHUNK, n)))) for i in range(0, n, CHUNK)]
+        return torch.cat(out) if out else torch.zeros(0, self.options.latent_dim)
+
+    # -- stage 3: the decoder, and the probe ------------------------------------------------------
+
+    def _fit_decoder(self) -> float:
+        """``decoder_epochs`` of cross-entropy on the pre-demonstrations' latents."""
+        z = self.latents(self.data_t.pre_pairs, len(self.data_t.pre_t))
+        actions = self.data_t.pre_actions.to(self.device)
+        self.decoder.train()
+        loss = torch.zeros(())
+        for _ in range(self.options.decoder_epochs):
+            order = torch.from_numpy(self.rng.permutation(len(z)))
+            for i in range(0, len(z), 512):
+                idx = order[i : i + 512]
+                loss = F.cross_entropy(self.decoder(z[idx]), actions[idx],
+                                       label_smoothing=self.options.label_smoothing)
+                self.decoder_opt.zero_grad(set_to_none=True)
+                loss.backward()
+                self.decoder_opt.step()
+        return float(loss.detach())
+
+    def _policy_step(self, batch: int) -> float:
+        """One Adam step of ``|| pi(s) - sg(z) ||^2`` on expert transitions."""
+        idx = torch.from_numpy(self.rng.integers(0, len(self.data_t.expert_t), batch))
+        s, s1 = self.data_t.expert_pairs(idx)
+        with torch.no_grad():
+            self.idm.eval()
+            z = self.idm(s, s1)
+        loss = F.mse_loss(self.policy(s), z)
+        self.policy_opt.zero_grad(set_to_none=True)
+        loss.backward()
+        self.policy_opt.step()
+        return float(loss.detach())
+
+    # -- the schedule -----------------------------------------------------------------------------
+
+    def train_iteration(self, iteration: int) -> dict[str, float]:
+        """Stages 1 and 3 in iteration 0; this iteration's share of stage 2."""
+        batch, opts = int(self.config.batch_size or 1), self.options
+        if iteration == 0:
+            self.idm.train()
+            self.fdm.train()
+            self.vq.train()
+            losses = [self._model_step(batch) for _ in range(opts.model_steps)]
+            self.vq.eval()
+            tail = losses[-100:] or [(float("nan"), float("nan"))]
+            self.stats = {"forward_loss": float(np.mean([x[0] for x in tail])),
+                          "commitment_loss": float(np.mean([x[1] for x in tail])),
+                          "decoder_loss": self._fit_decoder(), **self.probe()}  # fmt: skip
+        self.policy.train()
+        steps = iteration_steps(opts.policy_steps, iteration, self.num_iterations)
+        policy = [self._policy_step(batch) for _ in range(steps)]
+        return {**self.stats, "policy_loss": float(np.mean(policy[-100:])) if policy else
+                float("nan"), "policy_steps": steps, **self._expert_accuracy()}  # fmt: skip
+
+    def probe(self) -> dict[str, float]:
+        """The linear probe's held-out accuracy on the pre-demonstrations' latents (at most
+        ``4 * CHUNK`` transitions, evenly spaced), and the code tuples the expert uses."""
+        n = len(self.data_t.pre_t)
+        rows = torch.linspace(0, n - 1, min(n, 4 * CHUNK)).long()
+        z = self.latents(lambda idx: self.data_t.pre_pairs(rows[idx]), len(rows)).cpu()
+        accuracy = linear_probe_accuracy(z, self.data_t.pre_actions[rows],
+                                         self.data.n_actions, self.rng)  # fmt: skip
+        expert = self.latents(self.data_t.expert_pairs, len(self.data_t.expert_t))
+        _, _, codes = self.vq(expert) if len(expert) else (None, None, torch.zeros(0, 1))
+        return {"probe_accuracy": accuracy,
+                "codes_used": float(len(torch.unique(codes, dim=0)))}  # fmt: skip
+
+    @torch.no_grad()
+    def _expert_accuracy(self) -> dict[str, float]:
+        """How often the acting policy takes the expert's action in the expert's states (a
+        measurement only, never a label)."""
+        truth = self.data.expert_eval_actions
+        if len(truth) == 0:
+            return {}
+        rows = self.data_t.expert_t
+        acted = np.concatenate([self._act(self.data_t.expert_obs[rows[i : i + CHUNK]])
+                                for i in range(0, len(rows), CHUNK)])  # fmt: skip
+        return {"policy_action_accuracy": float((acted == truth).mean())}
+
+    @torch.no_grad()
+    def _act(self, x: torch.Tensor) -> np.ndarray:
+        self.policy.eval()
+        self.decoder.eval()
+        return self.decoder(self.policy(x.to(self.device))).argmax(1).cpu().numpy()
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """``argmax_a d(a | pi(s))`` for a batch."""
+        return self._act(torch.as_tensor(obs))
+
+    # -- state ------------------------------------------------------------------------------------
+
+    def state_dict(self) -> dict[str, Any]:
+        """Networks (the codebooks as the VQ's buffers), optimisers, the iteration-0
+        statistics and the generator's state (data only)."""
+        return {"idm": self.idm.state_dict(), "vq": self.vq.state_dict(),
+                "fdm": self.fdm.state_dict(), "policy": self.policy.state_dict(),
+                "decoder": self.decoder.state_dict(), "model_opt": self.model_opt.state_dict(),
+                "policy_opt": self.policy_opt.state_dict(),
+                "decoder_opt": self.decoder_opt.state_dict(), "stats": dict(self.stats),
+                "rng": self.rng.bit_generator.state}  # fmt: skip
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Restore :meth:`state_dict`.
+
+        Raises:
+            TypeError: Statistics that are not numbers by name.
+        """
+        stats = state["stats"]
+        if not isinstance(stats, dict) or not all(isinstance(v, float) for v in stats.values()):
+            raise TypeError("LAPO's statistics are not a dict of floats")
+        for name in ("idm", "vq", "fdm", "policy", "decoder"):
+            getattr(self, name).load_state_dict(state[name])
+        for name in ("model_opt", "policy_opt", "decoder_opt"):
+            getattr(self, name).load_state_dict(state[name])
+        self.stats = dict(stats)
+        self.rng.bit_generator.state = state["rng"]
