@@ -254,8 +254,10 @@ def _iteration(method: Method, cfg: RunConfig, data: TrainingData, i: int) -> di
         if learned is not None and learned.budget_cut is not None:
             record["budget_cut_runs"] = int(learned.budget_cut.sum())
         # Post-demonstrations counted now feed the next iteration; without them, and with
-        # nothing left to spend, more iterations would only repeat this one's training.
-        if method.budget_left == 0 and method.spent == spent and i + 1 < method.num_iterations:
+        # nothing left to spend, more iterations would only repeat this one's training (an
+        # offline method's go on training on the datasets: its gradient steps are not cut).
+        if (method.online and method.budget_left == 0 and method.spent == spent
+                and i + 1 < method.num_iterations):
             record["stopped"] = "budget"
     return record
 

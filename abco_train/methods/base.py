@@ -95,6 +95,10 @@ class Method(ABC):
 
     #: Post-demonstrations come from :meth:`explore` rollouts, not from the evaluation runs.
     explores: bool = False
+    #: Its iterations learn from interactions of its own (rollouts, RL or remapping steps);
+    #: ``False``: an offline method, whose later iterations go on training on the datasets,
+    #: so a spent budget does not end its run.
+    online: bool = True
     #: The method's options (none by default: every ``--method-options`` key is refused).
     Options: ClassVar[type[MethodOptions]] = MethodOptions
 

@@ -160,6 +160,11 @@ def test_interactions_are_the_pre_demonstrations_and_nothing_online(method, tiny
                                      "rl": 0, "remapping": 0}  # fmt: skip
     budget = train(_config(method, "CartPole-v1", tiny_data, tmp_path / "budget", budget=100))
     assert budget is not None and budget["interactions"]["pre_demonstration"] == 100
+    # the budget is spent on the data; its gradient steps are not cut: every iteration runs
+    rows = [json.loads(x) for x in (tmp_path / "budget" / "metrics.jsonl").read_text()
+            .splitlines()]  # fmt: skip
+    assert len(rows) == 2 and not any("stopped" in r for r in rows)
+    assert budget.get("stopped") is None
 
 
 @pytest.mark.parametrize("method", ["dilo", "lapo"])

@@ -178,11 +178,14 @@ def test_cuda_without_a_gpu_is_refused(tmp_path, capsys) -> None:
 @pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 @pytest.mark.parametrize("env, method", [("CartPole-v1", "abco"), ("AbcoMaze3x3-v0", "abco"),
-                                         ("AbcoMaze3x3-v0", "bco-alpha-torabi")])
+                                         ("AbcoMaze3x3-v0", "bco-alpha-torabi"),
+                                         ("AbcoMaze3x3-v0", "dilo"), ("AbcoMaze3x3-v0", "lapo")])
 def test_cuda_run_resumes_and_loads_on_cpu(tiny_data, tmp_path, env, method) -> None:
     """On a GPU the training data lives there (a maze's frames drawn there); a stopped run
     resumes from its checkpoint, and the policy loads on the CPU."""
-    cfg = tiny_config(env, method, tiny_data, tmp_path / "gpu", device="cuda")
+    few = {"dilo": {"steps": 4}, "lapo": {"model_steps": 4, "policy_steps": 4}}.get(method, {})
+    cfg = tiny_config(env, method, tiny_data, tmp_path / "gpu", device="cuda",
+                      method_options=few)  # fmt: skip
     assert train(cfg, stop_after=1) is None
     final = train(cfg)  # resumes from a checkpoint holding CUDA tensors
     assert json.loads((tmp_path / "gpu" / "config.json").read_text())["device"] == "cuda"

@@ -56,7 +56,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from abco_train.config.run import RunConfig
+from abco_train.config.run import ConfigError, RunConfig
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method
 from abco_train.methods.dilo.options import DILOOptions
@@ -70,6 +70,9 @@ from abco_train.methods.offline import (
 from abco_train.methods.registry import register
 
 __all__ = ["DILO", "DILOOptions", "f_star", "dual_loss", "orthogonal_gradient"]
+
+#: The most transitions the diagnostics read at once.
+CHUNK = 1024
 
 
 def f_star(x: torch.Tensor) -> torch.Tensor:
@@ -119,6 +122,7 @@ class DILO(Method):
 
     Options = DILOOptions
     options: DILOOptions
+    online = False  # the datasets alone: a spent budget cuts none of its steps
 
     def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
         super().__init__(config, data, rng)
@@ -129,9 +133,14 @@ class DILO(Method):
         pre_t, expert_t = self.data_t.pre_t.numpy(), self.data_t.expert_t.numpy()
         self.pre_rows = torch.from_numpy(pre_t[triples(pre_t)])
         self.expert_rows = torch.from_numpy(expert_t[triples(expert_t)])
+        if len(self.pre_rows) == 0 or len(self.expert_rows) == 0:
+            which = "pre-demonstrations" if len(self.pre_rows) == 0 else "expert data"
+            raise ConfigError(f"dilo needs episodes of two transitions or more; the {which} "
+                              "it trains on have none")  # fmt: skip
         stats = self.data_t.stats
         self.value = transition_network(config, data, stats, 2).to(self.device)  # twin heads
-        self.target = copy.deepcopy(self.value).requires_grad_(False)
+        # the target network: no gradient, always in evaluation mode (no dropout noise)
+        self.target = copy.deepcopy(self.value).requires_grad_(False).eval()
         self.policy = state_network(config, data, stats, data.n_actions, actions=True
                                     ).to(self.device)  # fmt: skip
         assert opts.value_lr and opts.policy_lr, "the run's lr fills them once it is resolved"
@@ -159,8 +168,8 @@ class DILO(Method):
         n, n_pre = len(s), len(pre_idx)
         first, second = torch.cat([s, s1]), torch.cat([s1, s2])
         online = self.value(first, second)  # (2n, 2): V(s, s') then V(s', s''), twin heads
-        with torch.no_grad():
-            target = self.target(first, second)
+        with torch.no_grad():  # the smaller target head, for both online heads (TwinQ's min)
+            target = self.target(first, second).min(1, keepdim=True).values
         forward_residual = opts.gamma * target[n:] - online[:n]
         backward_residual = opts.gamma * online[n:] - target[:n]
         forward = opts.lam * dual_loss(forward_residual[n_pre:], forward_residual[:n_pre],
@@ -178,13 +187,19 @@ class DILO(Method):
         with torch.no_grad():  # the target follows V (Polyak)
             for p, t in zip(self.value.parameters(), self.target.parameters()):
                 t.lerp_(p, opts.polyak)
+            for b, t in zip(self.value.buffers(), self.target.buffers()):
+                t.copy_(b)  # running statistics (ResNet's), as they are
         return float(forward.detach())
 
     def weights(self, s: torch.Tensor, s1: torch.Tensor) -> torch.Tensor:
-        """``min(exp(tau V(s, s')), clip)``, ``V`` the smaller twin head (no gradient)."""
+        """``min(exp(tau V(s, s')), clip)``, ``V`` the smaller twin head, read in evaluation
+        mode (no gradient, no dropout, no update of running statistics)."""
+        training = self.value.training
+        self.value.eval()
         with torch.no_grad():
             v = self.value(s, s1).min(1).values
-            return torch.exp(self.options.temperature * v).clamp_max(self.options.weight_clip)
+        self.value.train(training)
+        return torch.exp(self.options.temperature * v).clamp_max(self.options.weight_clip)
 
     def _policy_step(self, idx: torch.Tensor) -> None:
         """One Adam step of the weighted log-likelihood on offline transitions ``idx``."""
@@ -225,12 +240,17 @@ class DILO(Method):
         def spaced(n: int) -> torch.Tensor:
             return torch.linspace(0, n - 1, min(n, most)).long()
 
+        def chunked(pairs: Any, rows: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            """Weights and the policy's actions of transitions ``rows``, CHUNK at a time."""
+            out = [(self.weights(s, s1).cpu(), self.policy(s).argmax(1).cpu())
+                   for s, s1 in (pairs(rows[i : i + CHUNK]) for i in range(0, len(rows), CHUNK))]
+            return torch.cat([w for w, _ in out]), torch.cat([a for _, a in out])
+
         pre = spaced(len(self.data_t.pre_t))
-        w_pre = self.weights(*self.data_t.pre_pairs(pre))
-        w_exp = self.weights(*self.data_t.expert_pairs(spaced(len(self.data_t.expert_t))))
-        s, _ = self.data_t.pre_pairs(pre)
-        agree = self.policy(s).argmax(1).cpu() == self.data_t.pre_actions[pre]
-        w_pre_cpu = w_pre.cpu()
+        w_pre_cpu, acted = chunked(self.data_t.pre_pairs, pre)
+        w_exp, _ = chunked(self.data_t.expert_pairs, spaced(len(self.data_t.expert_t)))
+        w_pre = w_pre_cpu
+        agree = acted == self.data_t.pre_actions[pre]
         return {"weight_expert_mean": float(w_exp.mean()),
                 "weight_offline_mean": float(w_pre.mean()),
                 "weight_ratio": float(w_exp.mean() / w_pre.mean().clamp_min(1e-12)),

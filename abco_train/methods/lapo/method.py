@@ -84,6 +84,7 @@ class LAPO(Method):
 
     Options = LAPOOptions
     options: LAPOOptions
+    online = False  # the datasets alone: a spent budget cuts none of its steps
 
     def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
         super().__init__(config, data, rng)
