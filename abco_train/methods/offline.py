@@ -27,8 +27,22 @@ from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method
 from abco_train.networks.builders import build_networks, data_statistics
 
-__all__ = ["OfflineData", "offline_data", "state_network", "transition_network",
-           "iteration_steps", "triples"]  # fmt: skip
+__all__ = ["OfflineMethod", "OfflineData", "offline_data", "state_network",
+           "transition_network", "iteration_steps", "triples"]  # fmt: skip
+
+
+class OfflineMethod(Method):
+    """A method that learns from the datasets alone: its gradient steps are spread over
+    ``rounds`` iterations (an option of its own, not the run's ``iterations``, which is the
+    BCO family's alpha), each evaluated; a spent budget ends none of them."""
+
+    online = False
+    options: Any  # its options class has ``rounds`` (DILOOptions, LAPOOptions)
+
+    @property
+    def num_iterations(self) -> int:
+        """The method's ``rounds``."""
+        return int(self.options.rounds)
 
 
 @dataclass

@@ -58,9 +58,9 @@ import torch.nn.functional as F
 
 from abco_train.config.run import ConfigError, RunConfig
 from abco_train.harness.training_data import TrainingData
-from abco_train.methods.base import Method
 from abco_train.methods.dilo.options import DILOOptions
 from abco_train.methods.offline import (
+    OfflineMethod,
     iteration_steps,
     offline_data,
     state_network,
@@ -117,12 +117,11 @@ def orthogonal_gradient(forward: list[torch.Tensor], backward: list[torch.Tensor
 
 
 @register("dilo")
-class DILO(Method):
+class DILO(OfflineMethod):
     """DILO (see the module docstring): the action-free dual, then weighted cloning."""
 
     Options = DILOOptions
     options: DILOOptions
-    online = False  # the datasets alone: a spent budget cuts none of its steps
 
     def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
         super().__init__(config, data, rng)

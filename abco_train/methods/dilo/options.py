@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from abco_train.config.fields import MethodOptions, option
-from abco_train.config.limits import MAX_STEPS
+from abco_train.config.limits import MAX_ITERATIONS, MAX_STEPS
 from abco_train.config.run import RunConfig, env_kind
 
 __all__ = ["DILOOptions", "OPTION_DEFAULTS"]
@@ -36,6 +36,8 @@ class DILOOptions(MethodOptions):
 
     flag_prefix: ClassVar[str] = "dilo-"
 
+    rounds: int = option("training rounds, each evaluated: the steps are spread evenly over "
+                         "them", min=1, max=MAX_ITERATIONS)  # fmt: skip
     steps: int = option("gradient steps of the utility V(s, s') and the policy, spread evenly "
                         "over the run's iterations", min=1, max=MAX_STEPS)  # fmt: skip
     gamma: float = option("discount factor of the dual", min=0.0, max=1.0)
@@ -77,8 +79,8 @@ class DILOOptions(MethodOptions):
 #: control (the utility's loss is flat well before; validation seeds), 2,000 on frames, whose
 #: networks are the IDM's and cost a hundred times more a step.
 _CLASSIC: dict[str, Any] = {
-    "steps": 5000, "gamma": 0.99, "beta": 0.5, "lam": 0.8, "eta": 0.5, "temperature": 0.06,
-    "weight_clip": 100.0, "polyak": 0.005, "value_lr": None, "policy_lr": None,
+    "rounds": 3, "steps": 5000, "gamma": 0.99, "beta": 0.5, "lam": 0.8, "eta": 0.5,
+    "temperature": 0.06, "weight_clip": 100.0, "polyak": 0.005, "value_lr": None, "policy_lr": None,
 }  # fmt: skip
 OPTION_DEFAULTS: dict[str, dict[str, Any]] = {
     "classic": _CLASSIC, "maze": {**_CLASSIC, "steps": 2000}, "image": {**_CLASSIC, "steps": 2000},

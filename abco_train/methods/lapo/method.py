@@ -56,7 +56,6 @@ import torch.nn.functional as F
 
 from abco_train.config.run import RunConfig
 from abco_train.harness.training_data import TrainingData
-from abco_train.methods.base import Method
 from abco_train.methods.lapo.networks import (
     ForwardModel,
     VectorQuantiser,
@@ -65,6 +64,7 @@ from abco_train.methods.lapo.networks import (
 )
 from abco_train.methods.lapo.options import LAPOOptions
 from abco_train.methods.offline import (
+    OfflineMethod,
     iteration_steps,
     offline_data,
     state_network,
@@ -79,12 +79,11 @@ CHUNK = 1024
 
 
 @register("lapo")
-class LAPO(Method):
+class LAPO(OfflineMethod):
     """LAPO (see the module docstring): latent actions, latent cloning, a decoder."""
 
     Options = LAPOOptions
     options: LAPOOptions
-    online = False  # the datasets alone: a spent budget cuts none of its steps
 
     def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
         super().__init__(config, data, rng)

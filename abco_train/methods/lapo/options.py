@@ -24,7 +24,13 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from abco_train.config.fields import MethodOptions, option
-from abco_train.config.limits import MAX_EPOCHS, MAX_LATENTS, MAX_STEPS, MAX_WIDTH
+from abco_train.config.limits import (
+    MAX_EPOCHS,
+    MAX_ITERATIONS,
+    MAX_LATENTS,
+    MAX_STEPS,
+    MAX_WIDTH,
+)
 from abco_train.config.run import RunConfig, env_kind
 
 __all__ = ["LAPOOptions", "OPTION_DEFAULTS"]
@@ -36,6 +42,8 @@ class LAPOOptions(MethodOptions):
 
     flag_prefix: ClassVar[str] = "lapo-"
 
+    rounds: int = option("training rounds, each evaluated: stage 2's steps are spread evenly "
+                         "over them", min=1, max=MAX_ITERATIONS)  # fmt: skip
     codebooks: int = option("vector-quantisation codebooks", min=1, max=MAX_LATENTS)
     slots: int = option("latent vectors quantised per codebook", min=1, max=MAX_LATENTS)
     code_dim: int = option("width of a latent vector and of its codes", min=1, max=MAX_WIDTH)
@@ -81,7 +89,7 @@ class LAPOOptions(MethodOptions):
 #: steps of 128 (about a GPU-hour each); here classic control takes 4,000 and 2,000 of the
 #: run's ``--batch-size``, frames 1,500 and 1,000 (the run's networks on a CPU).
 _CLASSIC: dict[str, Any] = {
-    "codebooks": 2, "slots": 4, "code_dim": 16, "codes": 64, "commitment": 0.05,
+    "rounds": 3, "codebooks": 2, "slots": 4, "code_dim": 16, "codes": 64, "commitment": 0.05,
     "ema_decay": 0.999, "hidden": 64, "pool": 4, "model_steps": 4000, "model_lr": 3e-4,
     "grad_clip": 2.0, "policy_steps": 2000, "policy_lr": 2e-4, "decoder_epochs": 3,
     "label_smoothing": 0.05,
