@@ -31,7 +31,7 @@ authors' code, ``DILO.update_full`` in ``dilo.py``: the paper's body could not b
 ``V(s, s')`` is the run's IDM network with two outputs (the twin heads, one encoder: the
 authors' twin has two); ``pi`` the run's policy network
 (:mod:`abco_train.methods.offline`). Both train together, ``steps`` Adam steps spread evenly
-over the run's iterations (each iteration then evaluated), on minibatches of ``--batch-size``
+over ``rounds`` iterations (each then evaluated), on minibatches of ``--batch-size``
 offline and as many expert transitions. Transitions whose next state ends its episode have no
 ``s''`` and are left out of the dual (the authors' data loader drops them too); the policy
 learns from all offline transitions.

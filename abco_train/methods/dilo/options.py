@@ -39,7 +39,7 @@ class DILOOptions(MethodOptions):
     rounds: int = option("training rounds, each evaluated: the steps are spread evenly over "
                          "them", min=1, max=MAX_ITERATIONS)  # fmt: skip
     steps: int = option("gradient steps of the utility V(s, s') and the policy, spread evenly "
-                        "over the run's iterations", min=1, max=MAX_STEPS)  # fmt: skip
+                        "over the rounds", min=1, max=MAX_STEPS)  # fmt: skip
     gamma: float = option("discount factor of the dual", min=0.0, max=1.0)
     beta: float = option("share of the expert's transitions in the mixture the f-divergence "
                          "is taken over (the authors implement 0.5 only)", min=0.0,

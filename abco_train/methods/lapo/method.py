@@ -32,7 +32,7 @@ losses are those of the authors' code, ``stage1_idm.py``, ``stage2_bc.py``, ``la
   method needs them.
 
 Schedule: iteration 0 runs stage 1 (``model_steps``) and the decoder; stage 2's
-``policy_steps`` are spread evenly over the run's iterations, each then evaluated.
+``policy_steps`` are spread evenly over ``rounds`` iterations, each then evaluated.
 
 Interactions: the pre-demonstration transitions it trains on (with a ``--budget``, the first
 ones it pays for), nothing online.

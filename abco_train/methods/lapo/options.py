@@ -59,7 +59,7 @@ class LAPOOptions(MethodOptions):
     model_lr: float = option("Adam's learning rate of stage 1", min=0.0, exclusive=True)
     grad_clip: float = option("stage 1's gradient-norm clip", min=0.0, exclusive=True)
     policy_steps: int = option("Adam steps of the latent policy (stage 2), spread evenly over "
-                               "the run's iterations", min=0, max=MAX_STEPS)  # fmt: skip
+                               "the rounds", min=0, max=MAX_STEPS)  # fmt: skip
     policy_lr: float = option("Adam's learning rate of stage 2", min=0.0, exclusive=True)
     decoder_epochs: int = option("epochs of the latent -> action decoder over the "
                                  "pre-demonstrations (stage 3, offline)", min=0,
