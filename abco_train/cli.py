@@ -1,5 +1,5 @@
-"""The ``abco`` command: ``train``, ``bench``, ``report``, ``play``, ``convert-checkpoint``
-and ``data``.
+"""The ``abco`` command: ``train``, ``bench``, ``tune``, ``report``, ``play``,
+``convert-checkpoint`` and ``data``.
 
 Every field of :class:`abco_train.config.run.RunConfig` is an option of ``abco train`` and an
 override of ``abco bench`` (``--batch-size 32``, ``--no-attention``, ...), generated from the
@@ -42,6 +42,7 @@ from abco_train.config.fields import check_fields, count
 from abco_train.config.limits import MAX_JOBS
 from abco_train.config.run import ConfigError, add_config_options, config_from_args
 from abco_train.report.command import add_report_options, report
+from abco_train.tune.command import add_tune_options, run_tune
 
 __all__ = ["build_parser", "main"]
 
@@ -128,10 +129,19 @@ def _bench(args: argparse.Namespace) -> int:
     threads = {} if args.threads is None else {"threads": args.threads}
     check_fields(RunConfig(**overrides, **threads))  # types and bounds, before the grid's plan
     track, cells = _bench_plan(args)
+    tuned = None
+    if args.choices is not None:
+        from abco_train.methods.registry import load_plugins
+        from abco_train.tune.record import load_choices
+
+        if track is None:
+            raise ConfigError("--choices applies to a --track grid (it was tuned on one)")
+        load_plugins(args.plugin)  # a plugin method's search space is checked too
+        tuned = load_choices(args.choices, track)
     summary = run_grid(
         cells, args.out, overrides=overrides, method_options=_option_flags(args),
         plugins=args.plugin, backend=args.backend, jobs=args.jobs, threads=args.threads,
-        address=args.address, quiet=args.quiet, track=track,
+        address=args.address, quiet=args.quiet, track=track, tuned=tuned,
     )  # fmt: skip
     if summary["failed"]:  # the cells' own lines are above; the one error line says so
         from abco_train.bench.grid import failed_text
@@ -195,6 +205,9 @@ def _bench_options(parser: argparse.ArgumentParser) -> None:
                         "training on the first K layouts of the procedural datasets, in "
                         "OUT/{env}/{method}/layouts{K}/seed{seed} (e.g. 100,1000,10000; "
                         "default: the standard datasets)")  # fmt: skip
+    parser.add_argument("--choices", default=None, metavar="CHOICES.json",
+                        help="with --track: the settings `abco tune` chose for each method "
+                        "and task family (its choices.json); options given here win")
     parser.add_argument("--out", required=True, help="the grid's folder (RUNS_DIR)")
     parser.add_argument("--jobs", type=count(MAX_JOBS), default=None,
                         help=f"cells at once, at most {MAX_JOBS} (default: the cores, "
@@ -288,7 +301,7 @@ def _subcommand(sub: Any, name: str, help: str, options: Callable[[Any], None],
 
 
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
-    """The parser of ``abco``: ``train``, ``bench``, ``report``, ``play``,
+    """The parser of ``abco``: ``train``, ``bench``, ``tune``, ``report``, ``play``,
     ``convert-checkpoint`` and ``data``.
 
     Args:
@@ -303,6 +316,8 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     _subcommand(sub, "bench", "run an (env, method, seed) grid of training runs under "
                 "OUT/{env}/{method}/seed{seed}; finished cells are skipped", _bench_options,
                 _bench)  # fmt: skip
+    _subcommand(sub, "tune", "the same number of Optuna trials for every method of a track, on "
+                "its validation seeds and layouts", add_tune_options, run_tune)  # fmt: skip
     _subcommand(sub, "report", "tables and plots of an abco bench grid", add_report_options,
                 report, plugins=False)  # fmt: skip
     _subcommand(sub, "play", "roll a trained policy out and write an animated GIF",

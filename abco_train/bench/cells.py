@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -32,11 +32,11 @@ from typing import Any
 from abco_train.bench.records import RecordError, check_name, escape
 from abco_train.bench.tasks import Track
 from abco_train.config.limits import MAX_SEED
-from abco_train.config.run import MAX_LAYOUTS, ConfigError, RunConfig
+from abco_train.config.run import MAX_LAYOUTS, ConfigError, RunConfig, env_kind
 from abco_train.methods.registry import options_class
 
 __all__ = ["Cell", "CELL_FIELDS", "MAX_CELLS", "parse_seeds", "parse_list", "parse_layouts",
-           "plan", "plan_track", "cell_config", "check_method_options"]  # fmt: skip
+           "plan", "plan_track", "cell_config", "check_method_options", "Tuned"]  # fmt: skip
 
 #: Config fields the grid sets per cell (never trainer overrides).
 CELL_FIELDS = ("env", "method", "seed", "layouts", "run_dir", "quiet", "threads",
@@ -44,6 +44,8 @@ CELL_FIELDS = ("env", "method", "seed", "layouts", "run_dir", "quiet", "threads"
 #: Most cells of one grid (its plan, configs and rows are held in memory, and
 #: ``results.jsonl`` is rewritten after every cell); also the most seeds of one ``--seeds``.
 MAX_CELLS = 100_000
+#: Settings chosen per ``(method, task family)``: ``(run settings, method options)``.
+Tuned = Mapping[tuple[str, str], tuple[Mapping[str, Any], Mapping[str, Any]]]
 _RANGE = re.compile(r"([0-9]+)(?:\s*-\s*([0-9]+))?", re.ASCII)
 
 
@@ -202,6 +204,7 @@ def cell_config(
     threads: int = 1,
     method_options: dict[str, Any] | None = None,
     track: Track | None = None,
+    tuned: Tuned | None = None,
 ) -> dict[str, Any]:
     """The keyword arguments of the cell's :class:`abco_train.config.run.RunConfig`.
 
@@ -215,17 +218,26 @@ def cell_config(
             several methods gives each its own; :func:`check_method_options` refuses an
             option that no method of the grid has).
         track: The track of a task's cell: the task's settings, budget, headline and its
-            options for the cell's method come first.
+            options for the cell's method come first; on the track's validation seeds, a
+            maze's final evaluation plays validation layouts (``held_out``), never the test's.
+        tuned: Settings chosen per method and task family (``abco tune``'s ``choices.json``):
+            the cell's, under ``overrides`` and ``method_options`` (which win).
 
     Raises:
         ConfigError: An override of a per-cell field (env, method, seed, run_dir, ...), or of
             what the cell's task fixes (its budget, headline or a setting).
     """
-    overrides = {k: v for k, v in (overrides or {}).items() if v is not None}
+    settings, chosen = (tuned or {}).get((cell.method, env_kind(cell.env)), ({}, {}))
+    overrides = {**settings, **{k: v for k, v in (overrides or {}).items() if v is not None}}
+    method_options = {**chosen, **(method_options or {})}
     clash = sorted(set(overrides) & set(CELL_FIELDS))
     if clash:
         raise ConfigError(f"the grid sets {', '.join(clash)} per cell; not an override")
-    task = track.task(cell.task).config(cell.method) if track and cell.task else {}
+    task = {}
+    if track is not None and cell.task:
+        validation = bool(track.validation_seeds) and cell.seed in parse_seeds(
+            track.validation_seeds)  # fmt: skip
+        task = track.task(cell.task).config(cell.method, validation)
     clash = sorted(set(overrides) & (set(task) - {"method_options"}))
     if clash:
         raise ConfigError(f"task {cell.task} fixes {', '.join(clash)}; not an override")

@@ -46,6 +46,7 @@ from abco_train.bench import backends
 from abco_train.bench.cells import (
     CELL_FIELDS,
     Cell,
+    Tuned,
     cell_config,
     check_method_options,
     parse_layouts,
@@ -113,6 +114,7 @@ def run_grid(
     address: str | None = None,
     quiet: bool = False,
     track: Track | None = None,
+    tuned: Tuned | None = None,
 ) -> dict[str, Any]:
     """Run the unfinished cells of a grid and collect every cell into ``results.jsonl``.
 
@@ -130,6 +132,8 @@ def run_grid(
         address: Ray cluster to join (``ray`` backend).
         quiet: No progress bar or per-cell lines.
         track: The track of a grid of task cells (:func:`~abco_train.bench.cells.plan_track`).
+        tuned: Settings chosen per method and task family (``abco tune``'s choices), under
+            ``overrides`` and ``method_options``.
 
     Returns:
         A summary: cells, ran, skipped, failed (keys), wall_s, the path of the results (the
@@ -147,6 +151,9 @@ def run_grid(
         raise ConfigError("the grid has no cell (no env, method or seed given)")
     _check_backend_and_methods(backend, cells, plugins)
     check_method_options([c.method for c in cells], overrides, method_options)
+    for (method, _), (_, chosen) in (tuned or {}).items():
+        if method in {c.method for c in cells}:  # a chosen option the method does not have
+            check_method_options([method], None, dict(chosen))
     cores = backends.available_cores()
     local_jobs = max(1, jobs or cores)
     # jobs x threads fill the cores: one thread per cell at one cell per core (threads spin-wait
@@ -156,7 +163,8 @@ def run_grid(
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {escape(out)} is not a folder")
     out.mkdir(parents=True, exist_ok=True)
-    configs = [cell_config(c, out, overrides, threads, method_options, track) for c in cells]
+    configs = [cell_config(c, out, overrides, threads, method_options, track, tuned)
+               for c in cells]  # fmt: skip
     with grid_lock(out):
         finished = _finished_cells(cells, configs, out)
         rows = _results_so_far(out, cells, configs, finished)

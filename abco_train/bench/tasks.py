@@ -49,6 +49,7 @@ from typing import Any
 from abco_train.bench.records import RecordError, check_name, escape
 from abco_train.config.fields import ConfigError
 from abco_train.config.limits import MAX_BUDGET
+from abco_train.config.run import env_kind, validation_block
 
 __all__ = ["Task", "Track", "load_track", "TRACKS_DIR", "BUILTIN_TRACKS", "MAX_TASKS",
            "MAX_TRACK_BYTES"]  # fmt: skip
@@ -62,7 +63,7 @@ MAX_TASKS = 1_000
 MAX_TRACK_BYTES = 1_000_000
 #: Run-config fields a task may not set: the grid sets them per cell.
 _PER_CELL = ("env", "method", "seed", "run_dir", "quiet", "threads", "task", "budget",
-             "headline", "method_options")  # fmt: skip
+             "headline", "held_out", "method_options")  # fmt: skip
 _TRACK_KEYS = {"name", "description", "methods", "validation_seeds", "test_seeds"}
 _TASK_KEYS = {"name", "env", "budget", "headline", "measures", "basis", "settings",
               "method_settings", "method_options"}  # fmt: skip
@@ -95,12 +96,18 @@ class Task:
     method_settings: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     method_options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
-    def config(self, method: str | None = None) -> dict[str, Any]:
-        """The run-config fields of a run of this task (``method``'s options included)."""
+    def config(self, method: str | None = None, validation: bool = False) -> dict[str, Any]:
+        """The run-config fields of a run of this task (``method``'s options included);
+        ``validation``: a run on the track's validation seeds, whose mazes play validation
+        layouts (``held_out``) and rank by the block standing for the headline's."""
         options = dict(self.method_options.get(method, {})) if method else {}
         own = dict(self.method_settings.get(method, {})) if method else {}
+        headline, validation = self.headline, validation and env_kind(self.env) == "maze"
+        if validation and headline:
+            headline = validation_block(headline)
         return {**self.settings, **own, "env": self.env, "task": self.name, "budget": self.budget,
-                **({"headline": self.headline} if self.headline else {}),
+                **({"headline": headline} if headline else {}),
+                **({"held_out": "validation"} if validation else {}),
                 **({"method_options": options} if options else {})}  # fmt: skip
 
 

@@ -1,7 +1,8 @@
 """Typed settings: one machinery for the run config and every method's options.
 
 A setting is a dataclass field made by :func:`option`, carrying its help text and its checks
-(``choices``, a lower bound ``min`` (``exclusive`` or not), an upper bound ``max``). From the
+(``choices``, a lower bound ``min`` (``exclusive`` or not), an upper bound ``max``) and, where
+a tuner may change it, its range (``search``: a :class:`Search`). From the
 fields come the command-line options (:func:`add_field_options`: help, choices, defaults), the
 checks of a value from the command line or a JSON file (:func:`check_fields`: type, finite
 numbers, choices, bounds; one :class:`ConfigError` naming the option) and, for a method, its
@@ -36,7 +37,8 @@ from typing import Any, ClassVar
 from typing_extensions import Self
 
 __all__ = ["ConfigError", "option", "flag_of", "check_fields", "add_field_options",
-           "MethodOptions", "json_object", "int_list", "count"]  # fmt: skip
+           "MethodOptions", "Search", "search_space", "json_object", "int_list",
+           "count"]  # fmt: skip
 
 
 class ConfigError(ValueError):
@@ -47,6 +49,45 @@ def option(help: str, default: Any = None, **checks: Any) -> Any:
     """A setting: a dataclass field with its help text and checks (``choices``, ``min``,
     ``exclusive``, ``max``) as metadata."""
     return field(default=default, metadata={"help": help, **checks})
+
+
+@dataclass(frozen=True)
+class Search:
+    """The range a tuner (``abco tune``) searches for a setting: numbers from ``low`` to
+    ``high`` (``log``: on a log scale; whole numbers for an ``int`` setting), or one of
+    ``choices``.
+
+    Example:
+        >>> Search(1e-4, 1e-2, log=True).describe(float), Search(choices=(32, 64)).describe(int)
+        ('float in [0.0001, 0.01], log scale', 'one of 32, 64')
+    """
+
+    low: float = 0.0
+    high: float = 0.0
+    log: bool = False
+    choices: tuple[Any, ...] = ()
+
+    def suggest(self, trial: Any, name: str, kind: type) -> Any:
+        """The value an Optuna ``trial`` suggests for the setting ``name`` of type ``kind``."""
+        if self.choices:
+            return trial.suggest_categorical(name, list(self.choices))
+        if kind is int:
+            return trial.suggest_int(name, int(self.low), int(self.high), log=self.log)
+        return trial.suggest_float(name, float(self.low), float(self.high), log=self.log)
+
+    def describe(self, kind: type) -> str:
+        """The range in words."""
+        if self.choices:
+            return "one of " + ", ".join(map(str, self.choices))
+        low, high = (int(self.low), int(self.high)) if kind is int else (self.low, self.high)
+        return f"{kind.__name__} in [{low}, {high}]" + (", log scale" if self.log else "")
+
+
+def search_space(cls: type) -> dict[str, tuple[Search, type]]:
+    """The settings of the dataclass ``cls`` a tuner may change: name -> (range, type)."""
+    hints = typing.get_type_hints(cls)
+    return {f.name: (f.metadata["search"], base_type(hints[f.name]))
+            for f in fields(cls) if "search" in f.metadata}  # fmt: skip
 
 
 def flag_of(name: str, prefix: str = "") -> str:
@@ -218,11 +259,20 @@ class MethodOptions:
 
     #: Put before each option's flag on the command line (``ilpo-``: ``--ilpo-latents``).
     flag_prefix: ClassVar[str] = ""
+    #: The run config's tunable settings (``search``) the method reads: a tuner searches them
+    #: beside the method's own (a method whose networks ignore ``--lr`` lists none).
+    run_search: ClassVar[tuple[str, ...]] = ("lr",)
 
     @classmethod
     def names(cls) -> tuple[str, ...]:
         """The option names."""
         return tuple(f.name for f in fields(cls))
+
+    @classmethod
+    def searched(cls, method: str) -> tuple[str, ...]:
+        """The options with a ``search`` range that ``method`` reads (a class shared by
+        several methods leaves out what one of them ignores)."""
+        return tuple(search_space(cls))
 
     @classmethod
     def resolve(cls, given: Mapping[str, Any], defaults: Mapping[str, Any], method: str

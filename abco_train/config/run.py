@@ -46,7 +46,7 @@ from abco_train.config.defaults import (
     REGIME_DEFAULTS,
 )
 from abco_train.config.envs import BUILTIN_ENVS, env_spaces, is_builtin_env, parse_success
-from abco_train.config.fields import ConfigError, add_field_options, check_fields, option
+from abco_train.config.fields import ConfigError, Search, add_field_options, check_fields, option
 from abco_train.config.limits import (
     MAX_BATCH_SIZE,
     MAX_BUDGET,
@@ -67,12 +67,16 @@ __all__ = [
     "MOVED_TO_METHOD_OPTIONS", "MAX_SEED", "MAX_THREADS", "MAX_ITERATIONS", "MAX_BATCH_SIZE",
     "MAX_PRE_TRANSITIONS", "MAX_EXPERT_EPISODES", "MAX_EVAL_EPISODES", "MAX_EVAL_MAX_STEPS",
     "MAX_PLOT_LAYOUTS", "env_kind", "known_envs", "comparable", "fresh_evaluation",
-    "evaluation_blocks",
+    "evaluation_blocks", "HELD_OUT", "validation_block",
     "add_config_options", "config_from_args",
 ]  # fmt: skip
 
 PRESETS = ("cpu", "paper", "general")
 PROTOCOLS = ("paper", "standard")
+#: The unseen layouts a maze run's final evaluation plays: ``test`` (the test split, and fresh
+#: layouts with :func:`fresh_evaluation`) or ``validation`` (layouts disjoint from those, for
+#: runs that choose settings; their block is ``validation/{protocol}``).
+HELD_OUT = ("test", "validation")
 #: Encoder architectures: ``mlp`` (vector states), ``cnn`` (compact, CPU default for images),
 #: ``resnet18`` (the paper's image network), ``cellnet`` (mazes: per-cell features, a
 #: recurrent convolution over the cell grid and a global read-out), ``cellplan`` (the same
@@ -131,11 +135,30 @@ def fresh_evaluation(config: RunConfig) -> bool:
 
 def evaluation_blocks(config: RunConfig) -> tuple[str, ...]:
     """The blocks of ``config``'s final evaluation (``final.json`` keys): mazes
-    ``{train,test[,fresh]}/{paper,standard}``, other envs ``episodes``."""
+    ``{train,test[,fresh]}/{paper,standard}`` (a validation run: ``{train,validation}/...``),
+    other envs ``episodes``."""
     if env_kind(config.env) != "maze":
         return ("episodes",)
-    splits = ("train", "test", "fresh") if fresh_evaluation(config) else ("train", "test")
+    if config.held_out == "validation":
+        splits: tuple[str, ...] = ("train", "validation")
+    else:
+        splits = ("train", "test", "fresh") if fresh_evaluation(config) else ("train", "test")
     return tuple(f"{s}/{p}" for s in splits for p in PROTOCOLS)
+
+
+def validation_block(block: str) -> str:
+    """The block of a validation run (``held_out="validation"``) that stands for ``block`` of a
+    test run: the held-out layouts' (``test`` or ``fresh``) become ``validation``'s, the others
+    stay.
+
+    Example:
+        >>> validation_block("test/paper"), validation_block("fresh/standard")
+        ('validation/paper', 'validation/standard')
+        >>> validation_block("train/paper"), validation_block("episodes")
+        ('train/paper', 'episodes')
+    """
+    split, _, protocol = block.partition("/")
+    return f"validation/{protocol}" if split in ("test", "fresh") and protocol else block
 
 
 def known_envs() -> tuple[str, ...]:
@@ -173,7 +196,8 @@ class RunConfig:
                               choices=ARCHS)  # fmt: skip
     attention: bool | None = option("self-attention in both networks (default: the method's)")
     batch_size: int | None = option("minibatch size", min=1, max=MAX_BATCH_SIZE)
-    lr: float | None = option("Adam learning rate of both networks", min=0.0, exclusive=True)
+    lr: float | None = option("Adam learning rate of both networks", min=0.0, exclusive=True,
+                              search=Search(1e-4, 1e-2, log=True))  # every method's, tuned
     pre_transitions: int | None = option("use at most this many pre-demonstration transitions",
                                          min=1, max=MAX_PRE_TRANSITIONS)  # fmt: skip
     expert_episodes: int | None = option("use at most this many expert episodes", min=1,
@@ -188,6 +212,11 @@ class RunConfig:
                                       max=MAX_LAYOUTS)  # fmt: skip
     eval_fresh: bool | None = option("mazes: also evaluate the final policy on 100 fresh layouts, "
                                      "in no dataset (default: on with --layouts, else off)")
+    held_out: str = option("mazes: the unseen layouts of the final evaluation: test (the test "
+                           "split, and fresh layouts with --eval-fresh) or validation (layouts "
+                           "disjoint from both, in no expert episode of the run: for choosing "
+                           "settings; abco bench sets it on a track's validation seeds)", "test",
+                           choices=HELD_OUT)  # fmt: skip
     protocol: str = option("maze evaluation protocol while training: paper (4th visit of a cell "
                            "ends, return -1) or standard", "paper", choices=PROTOCOLS)
     success: str | None = option("when an evaluation episode counts as a success, where the "

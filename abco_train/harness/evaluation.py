@@ -5,7 +5,9 @@ tests): the ``train`` split (for a run on procedural data, the first
 :data:`abco_train.harness.training_data.TRAIN_EVAL_LAYOUTS` of its training layouts) while
 training, and at the end the ``train`` and ``test`` splits and, with
 :func:`abco_train.config.run.fresh_evaluation`, :data:`FRESH_LAYOUTS` fresh layouts
-(``fresh_layouts(n, FRESH_LAYOUTS, FRESH_SEED)``, the same for every run, in no dataset);
+(``fresh_layouts(n, FRESH_LAYOUTS, FRESH_SEED)``, the same for every run, in no dataset) or,
+for a run that chooses settings (``held_out="validation"``), the ``train`` split and the
+validation layouts of :func:`validation_set` instead of the test split and fresh layouts;
 classic control, ``eval_episodes`` episodes with seeds ``EVAL_SEED + 1000 * seed + i`` during
 training and ``FINAL_SEED + ...`` for the final evaluation (episodes never seen while
 training).
@@ -21,15 +23,20 @@ import numpy as np
 
 import abco_data
 import abco_envs
-from abco_train.config.run import RunConfig, fresh_evaluation
+from abco_envs.maze.layout import layout_hash
+from abco_envs.maze.pool import layout_pool
+from abco_envs.maze.procedural import MIN_FRESH_SIZE
+from abco_train.config.run import ConfigError, RunConfig, fresh_evaluation
 from abco_train.harness.code_version import code_version
 from abco_train.harness.rollouts import rollout, score
 from abco_train.harness.score_reference import layout_cells, score_reference
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method
 
-__all__ = ["episodes", "final_evaluation", "format_table", "fresh_set", "headline_block",
-           "EVAL_SEED", "FINAL_SEED", "FRESH_LAYOUTS", "FRESH_SEED"]  # fmt: skip
+__all__ = ["episodes", "final_evaluation", "format_table", "fresh_set", "validation_set",
+           "validation_layouts",
+           "headline_block", "EVAL_SEED", "FINAL_SEED", "FRESH_LAYOUTS", "FRESH_SEED",
+           "VALIDATION_SEED"]  # fmt: skip
 
 EVAL_SEED = 100_000_000
 FINAL_SEED = 200_000_000
@@ -37,6 +44,8 @@ FINAL_SEED = 200_000_000
 #: same for every run and method (a constant, not the run's seed).
 FRESH_LAYOUTS = 100
 FRESH_SEED = 300_000_000
+#: The stream of a validation run's fresh layouts (:func:`validation_set`).
+VALIDATION_SEED = 400_000_000
 
 
 def fresh_set(cfg: RunConfig) -> tuple[np.ndarray, abco_data.ReferenceReturns]:
@@ -45,6 +54,46 @@ def fresh_set(cfg: RunConfig) -> tuple[np.ndarray, abco_data.ReferenceReturns]:
     count = min(FRESH_LAYOUTS, cfg.eval_layouts or FRESH_LAYOUTS)
     return (abco_envs.fresh_layouts(n, count, FRESH_SEED),
             abco_data.fresh_reference(n, count, FRESH_SEED))  # fmt: skip
+
+
+def validation_layouts(cfg: RunConfig, data: TrainingData) -> tuple[np.ndarray, str]:
+    """The validation layouts of ``cfg``'s final evaluation and where they come from (mazes).
+
+    A run whose test is the test split: the ``train`` split's layouts that none of its expert
+    episodes plays (the test split is disjoint from the train split by construction). A run
+    tested on fresh layouts, or one whose expert plays every train layout (5x5 and larger):
+    :data:`FRESH_LAYOUTS` fresh layouts of a stream of their own (:data:`VALIDATION_SEED`), the
+    test's fresh layouts left out.
+
+    Raises:
+        ConfigError: No such layout (a 3x3 run whose expert plays every train layout: a 3x3
+            grid has a few dozen layouts beyond its pool).
+    """
+    n = abco_envs.maze_size(cfg.env)
+    count = min(FRESH_LAYOUTS, cfg.eval_layouts or FRESH_LAYOUTS)
+    kept: list[np.ndarray] = []
+    source = "train split, in no expert episode"
+    if not fresh_evaluation(cfg):
+        pool = layout_pool(n)
+        kept = [c for c, key in zip(pool.train, pool.train_ids)
+                if key not in data.expert_layout_ids]  # fmt: skip
+    if not kept and n > MIN_FRESH_SIZE:
+        tested = {layout_hash(c) for c in abco_envs.fresh_layouts(n, FRESH_LAYOUTS, FRESH_SEED)}
+        drawn = abco_envs.fresh_layouts(n, count + FRESH_LAYOUTS, VALIDATION_SEED)
+        kept, source = [c for c in drawn if layout_hash(c) not in tested], "fresh"
+    if not kept:
+        raise ConfigError(f"--held-out validation: the expert episodes play every layout of the "
+                          f"{n}x{n} train split, and a {n}x{n} maze has too few fresh layouts; "
+                          f"give fewer --expert-episodes")  # fmt: skip
+    return np.stack(kept[:count]), source
+
+
+def validation_set(cfg: RunConfig, data: TrainingData
+                   ) -> tuple[np.ndarray, abco_data.ReferenceReturns, str]:  # fmt: skip
+    """:func:`validation_layouts`, with their references between them and the source."""
+    layouts, source = validation_layouts(cfg, data)
+    reference = abco_data.layout_reference(layouts, "validation", stream=1 + VALIDATION_SEED)
+    return layouts, reference, source
 
 
 def episodes(cfg: RunConfig, data: TrainingData, split: str, seed: int,
@@ -71,7 +120,9 @@ def final_evaluation(
 
     Mazes: the ``train`` and ``test`` splits (keys ``train/paper``, ``train/standard``, ...),
     and with :func:`~abco_train.config.run.fresh_evaluation` the fresh layouts (``fresh/paper``,
-    ``fresh/standard``), each under both protocols; classic control: ``episodes``.
+    ``fresh/standard``), each under both protocols; a validation run (``held_out``) the
+    ``train`` split and :func:`validation_set` (``validation/paper``, ...) instead; classic
+    control: ``episodes``.
     """
     from abco_train.harness import plots
 
@@ -80,12 +131,15 @@ def final_evaluation(
                                "status": "ok"}  # fmt: skip
     if cfg.layouts is not None:
         results["layouts"] = cfg.layouts
-    splits = ["train", "test"]
-    fresh, fresh_ref = None, None
-    if maze and fresh_evaluation(cfg):
+    splits, held = ["train", "test"], {}  # split -> (its layouts, their references)
+    if maze and cfg.held_out == "validation":
+        layouts, reference, source = validation_set(cfg, data)
+        splits, held["validation"] = ["train", "validation"], (layouts, reference)
+        results["validation_layouts"] = {"count": len(layouts), "source": source}
+    elif maze and fresh_evaluation(cfg):
         splits.append("fresh")
-        fresh, fresh_ref = fresh_set(cfg)
-        results["fresh_layouts"] = {"count": len(fresh), "seed": FRESH_SEED}
+        held["fresh"] = fresh_set(cfg)
+        results["fresh_layouts"] = {"count": len(held["fresh"][0]), "seed": FRESH_SEED}
     settings = (
         [(s, p) for s in splits for p in ("paper", "standard")] if maze else
         [("episodes", "standard")]
@@ -93,17 +147,18 @@ def final_evaluation(
     results.update(_benchmark_keys(cfg, maze))
     figures = {}
     for split, protocol in settings:
-        is_fresh = split == "fresh"
+        given, reference = held.get(split, (None, data.reference))
         roll = rollout(method.act, cfg.env, protocol=protocol,
                        **episodes(cfg, data, "train" if split == "episodes" else split,
-                                      FINAL_SEED, fresh if is_fresh else None))  # fmt: skip
+                                      FINAL_SEED, given))  # fmt: skip
         key = split if not maze else f"{split}/{protocol}"
-        cells = layout_cells(cfg, data, split, fresh if is_fresh else None) if maze else None
-        results[key] = score(roll, fresh_ref if is_fresh else data.reference, per_episode=True,
+        cells = layout_cells(cfg, data, split, given) if maze else None
+        results[key] = score(roll, reference, per_episode=True,
                              score_reference=score_reference(cfg, data, protocol, cells))
         if cfg.plots and maze and protocol == cfg.protocol and roll.paths is not None:
             k = min(cfg.plot_layouts, len(roll.paths))
-            shown = (fresh if is_fresh else data.train_layouts if split == "train" else None)
+            shown = given if given is not None else (
+                data.train_layouts if split == "train" else None)
             if k:
                 figures[f"paths_{split}"] = str(plots.plot_maze_paths(
                     cfg.env, split, list(range(k)), roll.paths[:k],

@@ -35,7 +35,12 @@ from abco_train.config.envs import use_success_rule
 from abco_train.config.run import RunConfig
 from abco_train.harness.checkpoint import load_checkpoint, restore, save_checkpoint
 from abco_train.harness.code_version import code_version
-from abco_train.harness.evaluation import EVAL_SEED, episodes, final_evaluation
+from abco_train.harness.evaluation import (
+    EVAL_SEED,
+    episodes,
+    final_evaluation,
+    validation_layouts,
+)
 from abco_train.harness.metrics import health_summary
 from abco_train.harness.rollouts import Rollouts, rollout, score
 from abco_train.harness.run_folder import (
@@ -127,6 +132,8 @@ def _train(cfg: RunConfig, run_dir: Path, stop_after: int | None) -> dict[str, A
     # -- seeding, data, method --------------------------------------------------------------
     rng = seed_everything(cfg.seed, cfg.threads, cfg.deterministic)
     data = load_training_data(cfg)
+    if data.is_maze and cfg.held_out == "validation":
+        validation_layouts(cfg, data)  # refuse a run without them before it trains
     try:
         method = get_method(cfg.method)(cfg, data, rng)
     except BudgetExceeded as exc:  # a method that counts past the budget as it starts

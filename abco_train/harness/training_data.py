@@ -28,6 +28,7 @@ import abco_envs
 from abco_data.errors import DatasetFileNotFoundError
 from abco_data.format import LazyH5File
 from abco_data.format.arrays import MazeFrames
+from abco_envs.maze.layout import layout_hash
 from abco_train.config.run import ConfigError, RunConfig
 
 __all__ = ["TrainingData", "resolve_dataset", "looks_like_path", "check_dataset_paths",
@@ -151,6 +152,8 @@ class TrainingData:
         train_layouts: Mazes with ``--layouts``: the ``(k, n, n)`` layouts of the ``train``
             evaluation (the first ``min(K, TRAIN_EVAL_LAYOUTS)`` training layouts, whose
             references ``reference`` then includes); ``None``: the pool's train split.
+        expert_layout_ids: Mazes: the structural ids of the layouts the run's expert episodes
+            play (a validation evaluation leaves them out).
     """
 
     env_id: str
@@ -166,6 +169,7 @@ class TrainingData:
     expert_eval_actions: np.ndarray
     layouts: int | None = None
     train_layouts: np.ndarray | None = None
+    expert_layout_ids: frozenset[str] = frozenset()
 
     @property
     def is_maze(self) -> bool:
@@ -259,6 +263,15 @@ def distinct_layouts(arrays: abco_data.DatasetArrays, count: int) -> np.ndarray:
     return np.ascontiguousarray(arrays.layouts[starts[:count]])
 
 
+def shown_layout_ids(arrays: abco_data.DatasetArrays, episodes: int | None) -> frozenset[str]:
+    """The structural ids of the layouts of a maze dataset's first ``episodes`` episodes (all:
+    ``None``); empty for other datasets."""
+    if arrays.layouts is None or arrays.layout_indices is None:
+        return frozenset()
+    _, first = np.unique(arrays.layout_indices[:episodes], return_index=True)
+    return frozenset(layout_hash(cells) for cells in arrays.layouts[first])
+
+
 def load_training_data(config: RunConfig) -> TrainingData:
     """Load (download or generate if needed) and subsample the run's two datasets.
 
@@ -295,4 +308,5 @@ def load_training_data(config: RunConfig) -> TrainingData:
         reference=reference, pre_obs=pre_obs, pre_t=pre_t, pre_actions=pre_actions,
         expert_obs=expert_obs, expert_t=expert_t, expert_eval_actions=expert_actions,
         layouts=config.layouts, train_layouts=train_layouts,
+        expert_layout_ids=shown_layout_ids(arrays, config.expert_episodes),
     )  # fmt: skip

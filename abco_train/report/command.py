@@ -23,7 +23,7 @@ def report(args: argparse.Namespace) -> int:
     if args.track is not None:
         raise ConfigError("--track applies only with --tuning (the track of a tuning record)")
     files = write_report(args.runs_dir, args.out, args.labels_env, args.baseline,
-                         args.budget_curves)  # fmt: skip
+                         args.budget_curves, args.tuned_by)  # fmt: skip
     print(f"report: {files['report']}\ncsv: {files['csv']}")
     return 0
 
@@ -56,6 +56,9 @@ def add_report_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--budget-curves", default=None, metavar="CURVES_DIR",
                         help="a grid of budget variants of the track's tasks (TASK@xMULTIPLE):"
                         " their score-against-budget curves, the 1x points from RUNS_DIR")
+    parser.add_argument("--tuned-by", default=None, metavar="TUNING_DIR",
+                        help="an `abco tune --out` folder: the tuning effort of the grid's "
+                        "methods (trials per method and task family, on which seeds)")
     parser.add_argument("--tuning", default=None, metavar="CONFIG[,CONFIG...]",
                         help="write the tuning record of RUNS_DIR instead: one validation grid"
                         " per configuration in RUNS_DIR/CONFIG, the defaults first")

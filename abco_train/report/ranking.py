@@ -1,26 +1,28 @@
 """The benchmark track over its tasks: aggregates of the IfO methods, and which ones it tells
 apart.
 
-Each of the seven IfO methods (:data:`~abco_train.report.headline.IFO_METHODS`) with scored
+Each IfO method (:data:`~abco_train.report.headline.IFO_METHODS`) with scored
 runs on every task enters as a (runs x tasks) matrix of its runs' headline scores (a method
 with unequal runs across tasks keeps its ``n`` lowest-numbered seeds on every task, ``n`` its
 fewest on any; :func:`abco_train.report.aggregates.score_matrices`). With ``rliable``
 (``pip install "abco[stats]"``), as the paper track's aggregates:
 
-* IQM and optimality gap (``rliable.metrics.aggregate_iqm`` / ``aggregate_optimality_gap``,
-  gamma 1: the expert) with 95% stratified bootstrap intervals (runs resampled within each
-  task), and performance profiles;
-* for each of the 21 pairs, the probability of improvement P(X > Y) (a run of X beats a run of
-  Y on the same task, ties half, averaged over tasks) with its stratified independent
-  bootstrap interval, and a verdict (:func:`verdict`): ``separated`` when the interval
-  excludes 0.5, else ``tied``.
+* IQM, mean and optimality gap (``rliable.metrics.aggregate_iqm`` / ``aggregate_mean`` /
+  ``aggregate_optimality_gap``, gamma 1: the expert) with 95% stratified bootstrap intervals
+  (runs resampled within each task), and performance profiles;
+* for each pair, the probability of improvement P(X > Y) (a run of X beats a run of Y on the
+  same task, ties half, averaged over tasks) with its stratified independent bootstrap
+  interval, and a verdict (:func:`verdict`): ``better`` (X) when the interval lies above 0.5,
+  ``worse`` when below, ``equivalent`` when it lies inside ``[0.40, 0.60]``
+  (:data:`EQUIVALENCE`: neither is ahead by more than a tenth of the chance), else
+  ``undecided`` (more seeds would tell).
 
 Example:
-    >>> verdict(0.62, 0.81), verdict(0.35, 0.66), verdict(0.5, 0.7)
-    ('separated', 'tied', 'tied')
+    >>> verdict(0.62, 0.81), verdict(0.2, 0.45), verdict(0.45, 0.58), verdict(0.35, 0.66)
+    ('better', 'worse', 'equivalent', 'undecided')
     >>> ahead = standings({("abco", "bco"): (0.75, 0.6, 0.9), ("abco", "iupe"): (0.5, 0.3, 0.7)})
     >>> ahead["abco"], ahead["bco"]
-    (([('bco', 0.75)], [], [('iupe', 0.5)]), ([], [('abco', 0.25)], []))
+    (([('bco', 0.75)], [], [], [('iupe', 0.5)]), ([], [('abco', 0.25)], [], []))
 """
 
 from __future__ import annotations
@@ -38,38 +40,46 @@ from abco_train.report import aggregates
 from abco_train.report.headline import IFO_METHODS
 from abco_train.report.headline_plots import AGGREGATES_PNG, Interval, plot_aggregates
 
-__all__ = ["EVEN", "PROFILE_PNG", "Interval", "verdict", "standings", "Ranking", "compute",
-           "section"]  # fmt: skip
+__all__ = ["EVEN", "EQUIVALENCE", "VERDICTS", "PROFILE_PNG", "Interval", "verdict", "standings",
+           "Ranking", "compute", "section"]  # fmt: skip
 
 #: P(X > Y) of two methods the benchmark cannot tell apart.
 EVEN = 0.5
+#: A pair whose P(X > Y) interval lies inside this band is ``equivalent``.
+EQUIVALENCE = (0.40, 0.60)
+#: The verdicts of a pair, from X's side.
+VERDICTS = ("better", "worse", "equivalent", "undecided")
 PROFILE_PNG = "headline_profile.png"
 
 Scores = Mapping[str, Mapping[str, Mapping[int, float]]]  # method -> task -> seed -> score
 
 
-def verdict(low: float, high: float, even: float = EVEN) -> str:
-    """``separated`` when the interval ``[low, high]`` of P(X > Y) excludes ``even`` (one
-    method is ahead), else ``tied`` (an interval that reaches 0.5 is tied)."""
-    return "separated" if low > even or high < even else "tied"
+def verdict(low: float, high: float, even: float = EVEN,
+            band: tuple[float, float] = EQUIVALENCE) -> str:  # fmt: skip
+    """The verdict on X of the interval ``[low, high]`` of P(X > Y): ``better`` (it excludes
+    ``even`` from above), ``worse`` (from below), ``equivalent`` (inside ``band``) or
+    ``undecided`` (it reaches ``even`` and leaves the band: more runs would tell)."""
+    if low > even:
+        return "better"
+    if high < even:
+        return "worse"
+    return "equivalent" if band[0] <= low and high <= band[1] else "undecided"
 
 
 def standings(pairs: Mapping[tuple[str, str], Interval]
               ) -> dict[str, tuple[list[tuple[str, float]], ...]]:  # fmt: skip
-    """Per method: the methods it is ahead of, behind, and tied with, each with its P(method >
-    other), from the pairs' ``P(X > Y)`` intervals (in the pairs' order)."""
+    """Per method: the methods it is ahead of, behind, equivalent to and undecided against,
+    each with its P(method > other), from the pairs' ``P(X > Y)`` intervals (in the pairs'
+    order)."""
     out: dict[str, tuple[list[tuple[str, float]], ...]] = {}
+    flip = {"better": "worse", "worse": "better", "equivalent": "equivalent",
+            "undecided": "undecided"}  # fmt: skip
     for (x, y), (p, low, high) in pairs.items():
         for m in (x, y):
-            out.setdefault(m, ([], [], []))
-        if verdict(low, high) == "tied":
-            out[x][2].append((y, p))
-            out[y][2].append((x, 1.0 - p))
-        else:
-            winner, loser = (x, y) if low > EVEN else (y, x)
-            p_win = p if winner == x else 1.0 - p
-            out[winner][0].append((loser, p_win))
-            out[loser][1].append((winner, 1.0 - p_win))
+            out.setdefault(m, ([], [], [], []))
+        judged = verdict(low, high)
+        out[x][VERDICTS.index(judged)].append((y, p))
+        out[y][VERDICTS.index(flip[judged])].append((x, 1.0 - p))
     return out
 
 
@@ -143,7 +153,7 @@ def section(scores: Scores, tasks: Sequence[str], out: Path, labels: Mapping[str
         older: Finished runs without a score (older records), left out.
     """
     n = len(tasks)
-    head = [f"## Aggregates over the {n} task(s): the seven IfO methods", ""]
+    head = [f"## Aggregates over the {n} task(s): the IfO methods", ""]
     pair_head = ["## Pairwise: which IfO methods the benchmark tells apart", ""]
     lines = [f"Each IfO method ({', '.join(IFO_METHODS)}) with scored runs on every task enters"
              f" as a (runs x {n} tasks) matrix of headline scores; BC, the references and any"
@@ -181,15 +191,15 @@ def section(scores: Scores, tasks: Sequence[str], out: Path, labels: Mapping[str
 
 def _aggregate_table(ranking: Ranking, labels: Mapping[str, str], n: int,
                      csv_rows: list[dict[str, Any]]) -> list[str]:  # fmt: skip
-    """The methods by IQM (best first): IQM and optimality gap with their intervals."""
-    lines = ["", "| Rank | Method | Runs per task | IQM of score [95% CI] |"
-             " Optimality gap [95% CI] |", "|---|---|---|---|---|"]  # fmt: skip
+    """The methods by IQM (best first): IQM, mean and optimality gap with their intervals."""
+    lines = ["", "| Rank | Method | Runs per task | IQM of score [95% CI] | Mean [95% CI] |"
+             " Optimality gap [95% CI] |", "|---|---|---|---|---|---|"]  # fmt: skip
     order = sorted(ranking.matrices, key=lambda m: -ranking.iqm[m][0])
     for rank, m in enumerate(order, 1):
         x = ranking.matrices[m]
         runs = str(x.shape[0]) + (f" ({ranking.dropped[m]} dropped)" if ranking.dropped[m] else "")
         lines.append(f"| {rank} | {labels.get(m, m)} | {runs} | {_fmt(ranking.iqm[m])} |"
-                     f" {_fmt(ranking.gap[m])} |")  # fmt: skip
+                     f" {_fmt(ranking.mean[m])} | {_fmt(ranking.gap[m])} |")  # fmt: skip
         base = {"table": "headline-aggregate", "env": f"all {n} tasks", "method": m,
                 "evaluation": "headline", "seeds": x.shape[0], "paper": ""}  # fmt: skip
         mean, iqm, gap = ranking.mean[m], ranking.iqm[m], ranking.gap[m]
@@ -198,7 +208,9 @@ def _aggregate_table(ranking: Ranking, labels: Mapping[str, str], n: int,
                          "iqm_ci_high": iqm[2]})  # fmt: skip
         csv_rows.append({**base, "metric": "optimality_gap", "mean": gap[0], "ci_low": gap[1],
                          "ci_high": gap[2]})  # fmt: skip
-    lines += ["", "IQM: the mean of the middle 50% of all runs' scores over all tasks. Optimality"
+    lines += ["", "IQM: the mean of the middle 50% of all runs' scores over all tasks; mean: of"
+              " all of them (with scores split between modes, the IQM's middle half can fall"
+              " between them: read both). Optimality"
               " gap: the mean of max(1 - score, 0), how far the runs fall short of the expert"
               " (lower is better)."]  # fmt: skip
     return lines
@@ -209,23 +221,27 @@ def _pair_lines(ranking: Ranking, labels: Mapping[str, str], n: int,
     """The pairs' table (P(X > Y), its interval, the verdict), then one line per method."""
     if not ranking.pairs:
         return ["Only one IfO method has scored runs on every task: nothing to compare."]
+    lo, hi = EQUIVALENCE
     lines = ["P(X > Y): the probability that a run of X beats a run of Y on the same task (ties"
-             " count half), averaged over tasks; 0.5: no difference. Separated: the 95% interval"
-             " excludes 0.5; tied: it does not (an interval that reaches 0.5 is tied).", "",
+             " count half), averaged over tasks; 0.5: no difference. Verdict: better (the 95%"
+             " interval lies above 0.5: the table names the one ahead), equivalent (the interval"
+             f" lies inside [{lo:.2f}, {hi:.2f}]: neither is ahead by more than that), undecided"
+             " (the interval reaches 0.5 and leaves that band: more seeds would tell).", "",
              "| X | Y | P(X > Y) [95% CI] | Verdict |", "|---|---|---|---|"]  # fmt: skip
     for (x, y), p in ranking.pairs.items():
         judged = verdict(p[1], p[2])
-        if judged == "separated":
-            judged += f": {labels.get(x, x) if p[1] > EVEN else labels.get(y, y)} ahead"
+        if judged in ("better", "worse"):
+            judged = f"better: {labels.get(x, x) if judged == 'better' else labels.get(y, y)}"
         lines.append(f"| {labels.get(x, x)} | {labels.get(y, y)} | {_fmt(p)} | {judged} |")
         csv_rows.append({"table": "pairwise", "env": f"all {n} tasks", "method": x,
                          "evaluation": "headline", "metric": f"probability_of_improvement_over_{y}",
                          "seeds": ranking.matrices[x].shape[0], "mean": p[0], "ci_low": p[1],
                          "ci_high": p[2], "paper": ""})  # fmt: skip
     lines += ["", "Per method (`name`: P(it beats the other)):", ""]
-    for m, (ahead, behind, tied) in standings(ranking.pairs).items():
+    for m, (ahead, behind, even, open_) in standings(ranking.pairs).items():
         parts = [f"{word} {', '.join(f'`{o}` {p:.2f}' for o, p in group)}"
                  for word, group in (("ahead of", ahead), ("behind", behind),
-                                     ("tied with", tied)) if group]  # fmt: skip
+                                     ("equivalent to", even), ("undecided against", open_))
+                 if group]  # fmt: skip
         lines.append(f"- {labels.get(m, m)} (`{m}`): {'; '.join(parts)}.")
     return lines

@@ -43,7 +43,7 @@ from abco_train.report.stats import CellStats, cell_stats
 __all__ = [
     "MAZES", "TABLE1_ENVS", "TABLE1_METHODS", "TABLE2_METHODS", "TABLE2_ENV", "ORDER",
     "LABELS", "GOALS", "CSV_FIELDS", "table_evaluation", "method_order", "env_order",
-    "ReportError", "Run", "load_runs", "Grid",
+    "ReportError", "Run", "load_runs", "Grid", "check_baseline",
 ]  # fmt: skip
 
 MAZES = abco_envs.MAZE_IDS
@@ -276,3 +276,15 @@ class Grid:
                     if v is not None:
                         out.setdefault(m, {}).setdefault(e, {})[r.seed] = float(v.mean())
         return out
+
+
+def check_baseline(baseline: str | None, grid: Grid, runs_dir: str | Path) -> str:
+    """The probability of improvement's baseline: ``baseline`` (a method of the grid), or abco.
+
+    Raises:
+        ReportError: ``baseline`` is not a method of the grid.
+    """
+    if baseline is not None and baseline not in grid.methods:
+        raise ReportError(f"unknown baseline {baseline!r}: not a method of {runs_dir}; methods"
+                          f" found: {', '.join(grid.methods)}")  # fmt: skip
+    return baseline or "abco"

@@ -14,13 +14,10 @@ tables, with the paper's P. Every record's code version and training time:
 :mod:`abco_train.report.provenance`.
 
 The main table (Table 1 re-measured) holds every method found: the built-ins in the order of
-:data:`ORDER`, then any other (a user's plugin) alphabetically. The runs and the tables' names
-are :mod:`abco_train.report.runs`; per-cell statistics (mean, IQM, bootstrap intervals)
-:mod:`abco_train.report.stats`; the aggregates across environments (rliable)
-:mod:`abco_train.report.aggregates`; the published numbers :mod:`abco_train.report.published`;
-the tables' pieces :mod:`abco_train.report.tables`; the generalisation section
-:mod:`abco_train.report.generalisation`; the plots :mod:`abco_train.report.plots`. This module
-puts them together (:func:`write_report`).
+:data:`ORDER`, then any other (a user's plugin) alphabetically. The pieces: runs and names
+:mod:`~abco_train.report.runs`, per-cell statistics :mod:`~abco_train.report.stats`, aggregates
+:mod:`~abco_train.report.aggregates`, tables :mod:`~abco_train.report.tables`, plots
+:mod:`~abco_train.report.plots`; this module puts them together (:func:`write_report`).
 
 Example:
     >>> table_evaluation("AbcoMaze5x5-v0", "test"), table_evaluation("CartPole-v1")
@@ -66,6 +63,7 @@ from abco_train.report.runs import (
     Grid,
     ReportError,
     Run,
+    check_baseline,
     env_order,
     load_runs,
     method_order,
@@ -131,7 +129,8 @@ def _intro(grid: Grid, skipped: list[Skipped]) -> list[str]:
 
 def write_report(runs_dir: str | Path, out: str | Path | None = None,
                  labels_env: str = TABLE2_ENV, baseline: str | None = None,
-                 budget_curves: str | Path | None = None) -> dict[str, Path]:  # fmt: skip
+                 budget_curves: str | Path | None = None, tuned_by: str | Path | None = None
+                 ) -> dict[str, Path]:  # fmt: skip
     """Write ``report.md``, ``results.csv`` and the plots of the grid in ``runs_dir``.
 
     Args:
@@ -143,6 +142,8 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
         budget_curves: A grid of budget variants of the benchmark's tasks (tasks named
             ``{task}@x{multiple}``; :mod:`abco_train.report.budget_curves`): their curves,
             with the 1x points from ``runs_dir``, follow the benchmark track.
+        tuned_by: An ``abco tune`` folder: the tuning effort of the grid's methods follows
+            (:mod:`abco_train.report.tuning_effort`).
 
     Returns:
         The written files by name (``report``, ``csv``, and the plots that had data:
@@ -163,7 +164,7 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
     runs_dir = Path(runs_dir)
     skipped: list[Skipped] = []
     runs = _runs(runs_dir, skipped)
-    baseline = _baseline(baseline, Grid(runs), runs_dir)
+    baseline = check_baseline(baseline, Grid(runs), runs_dir)
     found = sorted({r.env for r in runs}, key=env_order)
     if labels_env not in found and labels_env not in TABLE1_ENVS:
         raise ReportError(f"unknown --labels-env {escape(labels_env, 80)!r}: not an env of"
@@ -173,7 +174,7 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
     stage.mkdir()
     try:
         md, csv_rows, files = _compose(runs_dir, runs, skipped, stage, labels_env, baseline,
-                                       budget_curves)  # fmt: skip
+                                       budget_curves, tuned_by)  # fmt: skip
         _write(stage, md, csv_rows, files)
         return _publish(stage, out, files)
     finally:
@@ -181,7 +182,8 @@ def write_report(runs_dir: str | Path, out: str | Path | None = None,
 
 
 def _compose(runs_dir: Path, runs: list[Run], skipped: list[Skipped], out: Path,
-             labels_env: str, baseline: str, budget_curves: str | Path | None = None
+             labels_env: str, baseline: str, budget_curves: str | Path | None = None,
+             tuned_by: str | Path | None = None
              ) -> tuple[list[str], list[dict[str, Any]], dict[str, Path]]:  # fmt: skip
     """The report's Markdown lines, its CSV rows, and its plots (drawn into ``out``): the
     benchmark track (records with a task) first, then the paper track (records without)."""
@@ -207,6 +209,11 @@ def _compose(runs_dir: Path, runs: list[Run], skipped: list[Skipped], out: Path,
         if png is not None:
             files["budget_curves"] = png
             md += [f"![Score against the interaction budget]({png.name})"]
+    if tuned_by is not None:
+        from abco_train.report import tuning_effort
+
+        tuned = method_order({r.method for r in runs} - set(headline.REFERENCE_METHODS))
+        md += ["", *tuning_effort.section(tuned_by, tuned)]
     if paper_runs:
         lines, plots, png = _paper_track(paper_runs, skipped, out, labels_env, baseline,
                                          timed.seconds, csv_rows)  # fmt: skip
@@ -328,18 +335,6 @@ def _runs(runs_dir: Path, skipped: list[Skipped]) -> list[Run]:
                           f" ({{env}}/{{method}}/seed{{n}}){why}; is it an `abco bench --out`"
                           " folder?")  # fmt: skip
     return runs
-
-
-def _baseline(baseline: str | None, grid: Grid, runs_dir: Path) -> str:
-    """The probability of improvement's baseline: ``baseline`` (a method of the grid), or abco.
-
-    Raises:
-        ReportError: ``baseline`` is not a method of the grid.
-    """
-    if baseline is not None and baseline not in grid.methods:
-        raise ReportError(f"unknown baseline {baseline!r}: not a method of {runs_dir}; methods"
-                          f" found: {', '.join(grid.methods)}")  # fmt: skip
-    return baseline or "abco"
 
 
 def _paper_sections(grid: Grid, wall: float | None, agg_lines: list[str],

@@ -1,7 +1,8 @@
 """``abco report`` on a benchmark track: synthetic run folders of records that carry a task.
 
-Three tasks, seeds 0-2, every method: ``abco`` and ``iupe`` score the same (tied), every other
-IfO method lies strictly between or below (separated); ``bc`` beats them all on true actions
+Three tasks, seeds 0-2, every method: ``abco`` and ``iupe`` score the same (undecided on three
+seeds: the interval of P leaves [0.40, 0.60]), every other IfO method lies strictly between or
+below (one better); ``bc`` beats them all on true actions
 (a reference, kept out of the aggregates); ``random`` did not run on one task; ``bc``'s
 records on the maze task and one ``bco`` record predate the score; ``ilpo``'s records carry no
 code version and one ``abco`` record another one; a record without a task (the paper track)
@@ -176,30 +177,36 @@ def test_pairwise_verdicts(reported: dict[str, Any]) -> None:
     rows = [x.split(" | ") for x in part.splitlines() if x.startswith("| ")][1:]
     assert len(rows) == 21
     verdicts = {(r[0][2:], r[1]): r[3].rstrip(" |") for r in rows}
-    assert verdicts[("ABCO(α)", "IUPE")] == "tied"
-    assert verdicts[("BCO", "ABCO(α)")] == "separated: ABCO(α) ahead"
-    assert verdicts[("BCO", "GAIfO")] == "separated: BCO ahead"
+    # the same scores, but three seeds a task: P's interval is wider than the equivalence band
+    assert verdicts[("ABCO(α)", "IUPE")] == "undecided"
+    assert verdicts[("BCO", "ABCO(α)")] == "better: ABCO(α)"
+    assert verdicts[("BCO", "GAIfO")] == "better: BCO"
     assert "- ABCO(α) (`abco`): ahead of `bco` 1.00, `bco-alpha` 1.00" in part
-    assert "; tied with `iupe` 0.50." in part
+    assert " `iupe` 0.50." in part
     assert sum(r["table"] == "pairwise" for r in reported["rows"]) == 21
 
 
 @pytest.mark.parametrize(("low", "high", "expected"), [
-    (0.62, 0.91, "separated"),  # a clear win of X
-    (0.02, 0.31, "separated"),  # a clear win of Y
-    (0.35, 0.66, "tied"),  # a clear tie
-    (0.5, 0.8, "tied"),  # touching 0.5 from above
-    (0.2, 0.5, "tied"),  # touching 0.5 from below
-    (0.5, 0.5, "tied"),  # every run tied
+    (0.62, 0.91, "better"),  # a clear win of X
+    (0.02, 0.31, "worse"),  # a clear win of Y
+    (0.35, 0.66, "undecided"),  # reaches 0.5, leaves the band
+    (0.5, 0.8, "undecided"),  # touching 0.5 from above
+    (0.2, 0.5, "undecided"),  # touching 0.5 from below
+    (0.5, 0.5, "equivalent"),  # every run tied
+    (0.41, 0.59, "equivalent"),  # inside [0.40, 0.60]
+    (0.40, 0.60, "equivalent"),  # the band's edges count
+    (0.52, 0.58, "better"),  # inside the band, but above 0.5: ahead by a little
 ])  # fmt: skip
 def test_verdict(low: float, high: float, expected: str) -> None:
     assert verdict(low, high) == expected
 
 
 def test_standings_name_who_is_ahead() -> None:
-    table = standings({("bco", "abco"): (0.25, 0.1, 0.4), ("bco", "iupe"): (0.5, 0.5, 0.7)})
-    assert table["abco"] == ([("bco", 0.75)], [], [])
-    assert table["bco"] == ([], [("abco", 0.25)], [("iupe", 0.5)])
+    table = standings({("bco", "abco"): (0.25, 0.1, 0.4), ("bco", "iupe"): (0.5, 0.5, 0.7),
+                       ("abco", "iupe"): (0.5, 0.45, 0.55)})  # fmt: skip
+    assert table["abco"] == ([("bco", 0.75)], [], [("iupe", 0.5)], [])
+    assert table["bco"] == ([], [("abco", 0.25)], [], [("iupe", 0.5)])
+    assert table["iupe"] == ([], [], [("abco", 0.5)], [("bco", 0.5)])
 
 
 def test_other_code_versions_are_flagged(reported: dict[str, Any]) -> None:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import abco_envs
-from abco_train.config.fields import ConfigError, MethodOptions, option
+from abco_train.config.fields import ConfigError, MethodOptions, Search, option
 from abco_train.config.limits import MAX_EPOCHS, MAX_PRE_TRANSITIONS, MAX_STEPS
 from abco_train.config.run import CELL_ARCHS, IDM_INPUTS, RunConfig, env_kind
 
@@ -58,10 +58,10 @@ class BCOOptions(MethodOptions):
                                    "and s' - s) or pair (each frame encoded apart; images "
                                    "only)", choices=IDM_INPUTS)  # fmt: skip
     idm_epochs: int | None = option("at most this many IDM epochs over I_s per iteration",
-                                    min=1, max=MAX_EPOCHS)
+                                    min=1, max=MAX_EPOCHS, search=Search(2, 40, log=True))
     idm_patience: int | None = option("stop the IDM's epochs after this many without a better "
                                       "validation accuracy (the best weights are kept)",
-                                      min=1, max=MAX_EPOCHS)
+                                      min=1, max=MAX_EPOCHS, search=Search(1, 8))
     idm_reinit: bool = option("re-initialise an IDM found at chance after training and train "
                               "it once more (off: Algorithm 1 never re-initialises; the run "
                               "goes on either way)", False)
@@ -71,7 +71,7 @@ class BCOOptions(MethodOptions):
     idm_samples: int | None = option("cap on N = |I_s| (default: |I_pre|)",
                                      min=1, max=MAX_PRE_TRANSITIONS)
     policy_epochs: int | None = option("policy epochs over the expert data per iteration",
-                                       min=1, max=MAX_EPOCHS)
+                                       min=1, max=MAX_EPOCHS, search=Search(1, 16, log=True))
     first_epochs_factor: int | None = option("iteration 0 trains both nets this many times "
                                              "longer", min=1, max=MAX_EPOCHS)  # fmt: skip
     min_updates: int | None = option("raise --policy-epochs and --idm-epochs on small data "
@@ -86,6 +86,14 @@ class BCOOptions(MethodOptions):
                                  "transpose half of each minibatch about the main diagonal, "
                                  "actions N<->W, S<->E) (default: transpose for the general "
                                  "preset, else none)", choices=AUGMENTS)  # fmt: skip
+
+    @classmethod
+    def searched(cls, method: str) -> tuple[str, ...]:
+        """BC trains no IDM: its search leaves the IDM's options out."""
+        names = super().searched(method)
+        if VARIANTS.get(method, {}).get("idm_data", "pre") is None:
+            return tuple(n for n in names if not n.startswith("idm_"))
+        return names
 
     @classmethod
     def for_run(cls, config: RunConfig, method: str = "abco") -> BCOOptions:

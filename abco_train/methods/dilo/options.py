@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from abco_train.config.fields import MethodOptions, option
+from abco_train.config.fields import MethodOptions, Search, option
 from abco_train.config.limits import MAX_ITERATIONS, MAX_STEPS
 from abco_train.config.run import RunConfig, env_kind
 
@@ -45,9 +45,11 @@ class DILOOptions(MethodOptions):
                          "is taken over (the authors implement 0.5 only)", min=0.0,
                          max=1.0)  # fmt: skip
     lam: float = option("weight of the dual's residual terms against the mean utility on the "
-                        "offline data (the authors' lamda)", min=0.0, max=1.0)  # fmt: skip
+                        "offline data (the authors' lamda)", min=0.0, max=1.0,
+                        search=Search(0.5, 0.95))  # fmt: skip
     eta: float = option("weight of the backward residual's loss (the authors' ita)", min=0.0)
-    temperature: float = option("tau of the policy's weights exp(tau V(s, s'))", min=0.0)
+    temperature: float = option("tau of the policy's weights exp(tau V(s, s'))", min=0.0,
+                                search=Search(0.02, 1.0, log=True))
     weight_clip: float = option("the largest weight of a transition in the policy's loss",
                                 min=0.0, exclusive=True)  # fmt: skip
     polyak: float = option("step of the utility's target network towards it, per update",

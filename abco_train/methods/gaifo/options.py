@@ -27,7 +27,7 @@ from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
 import abco_envs
-from abco_train.config.fields import ConfigError, MethodOptions, flag_of, option
+from abco_train.config.fields import ConfigError, MethodOptions, Search, flag_of, option
 from abco_train.config.limits import MAX_ENVS, MAX_EPOCHS, MAX_STEPS, MAX_WIDTH
 from abco_train.config.run import RunConfig, env_kind
 
@@ -47,6 +47,8 @@ class GAIfOOptions(MethodOptions):
     """GAIfO's PPO learner and discriminator; an option left ``None`` takes the run's
     default (:meth:`for_run`), so that none is ``None`` once resolved."""
 
+    run_search: ClassVar[tuple[str, ...]] = ()  # its learning rates are options of its own
+
     flag_prefix: ClassVar[str] = "gaifo-"
 
     rl_steps: int = option("most PPO env steps per run, split into rollouts (whole rollouts "
@@ -56,9 +58,10 @@ class GAIfOOptions(MethodOptions):
     n_steps: int = option("steps per env per rollout: a round is n_steps * n_envs",
                           min=1, max=MAX_STEPS)
     batch_size: int = option("PPO minibatch", min=1, max=MAX_STEPS)
-    n_epochs: int = option("PPO epochs per rollout", min=1, max=MAX_EPOCHS)
+    n_epochs: int = option("PPO epochs per rollout", min=1, max=MAX_EPOCHS, search=Search(3, 20))
     learning_rate: float = option("PPO's learning rate (Adam; the start value if linear)",
-                                  min=0.0, exclusive=True)  # fmt: skip
+                                  min=0.0, exclusive=True, search=Search(5e-5, 3e-3, log=True)
+                                  )  # fmt: skip
     learning_rate_schedule: str = option("PPO's learning rate over the run's PPO steps: "
                                          "constant, or linear down to 0", choices=SCHEDULES)
     gamma: float = option("PPO's discount factor", min=0.0, max=1.0)
@@ -67,7 +70,8 @@ class GAIfOOptions(MethodOptions):
                                exclusive=True)  # fmt: skip
     clip_range_schedule: str = option("PPO's clip range over the run's PPO steps: constant, "
                                       "or linear down to 0", choices=SCHEDULES)  # fmt: skip
-    ent_coef: float = option("PPO's entropy coefficient", min=0.0)
+    ent_coef: float = option("PPO's entropy coefficient", min=0.0,
+                             search=Search(1e-4, 0.05, log=True))
     vf_coef: float = option("PPO's value-loss coefficient", min=0.0)
     max_grad_norm: float = option("PPO's gradient-norm clip", min=0.0, exclusive=True)
     normalize: bool = option("stable-baselines3's VecNormalize between the env and PPO: "
@@ -80,7 +84,8 @@ class GAIfOOptions(MethodOptions):
                          "gail (-log(1 - D)) or log_d (log D)", choices=REWARDS)  # fmt: skip
     reward_clip: float = option("rewards are clipped to [-reward_clip, reward_clip]", min=0.0,
                                 exclusive=True)  # fmt: skip
-    d_lr: float = option("the discriminator's learning rate (Adam)", min=0.0, exclusive=True)
+    d_lr: float = option("the discriminator's learning rate (Adam)", min=0.0, exclusive=True,
+                         search=Search(3e-5, 3e-3, log=True))
     d_epochs: int = option("discriminator passes over each round's learner pairs",
                            min=1, max=MAX_EPOCHS)
     d_batch_size: int = option("learner pairs per discriminator minibatch (plus as many expert "

@@ -28,7 +28,7 @@ from typing import Any, ClassVar
 import abco_envs
 from abco_data.registry import ACTION_COUNTS
 from abco_train.config.envs import env_spaces
-from abco_train.config.fields import ConfigError, MethodOptions, flag_of, option
+from abco_train.config.fields import ConfigError, MethodOptions, Search, flag_of, option
 from abco_train.config.limits import MAX_ENVS, MAX_EPOCHS, MAX_LATENTS, MAX_STEPS, MAX_WIDTH
 from abco_train.config.run import RunConfig, env_kind
 
@@ -55,7 +55,8 @@ class ILPOOptions(MethodOptions):
     latents: int | None = option("k, the number of latent actions (default: the env's number "
                                  "of actions)", min=2, max=MAX_LATENTS)  # fmt: skip
     train_steps: int = option("Adam steps of G and pi on the expert pairs in iteration 0",
-                              min=0, max=MAX_STEPS)  # fmt: skip
+                              min=0, max=MAX_STEPS, search=Search(500, 6000, log=True)
+                              )  # fmt: skip
     policy_steps: int | None = option("train G alone for --ilpo-train-steps steps, then pi alone "
                                       "for this many steps against the fixed G; null: train "
                                       "them together (default: 1000 on mazes, null on classic "
@@ -71,9 +72,10 @@ class ILPOOptions(MethodOptions):
                          "cells (how much each maze cell changed; mazes only)",
                          choices=TARGETS)  # fmt: skip
     exp_weight: float = option("fraction of L_exp's gradient that reaches G (joint schedule "
-                               "only)", min=0.0, max=1.0)  # fmt: skip
+                               "only)", min=0.0, max=1.0, search=Search(0.0, 1.0)
+                               )  # fmt: skip
     relax: float = option("relaxed winner-takes-all: L_min plus relax * mean_z ||.||^2",
-                          min=0.0, max=1.0)  # fmt: skip
+                          min=0.0, max=1.0, search=Search(0.01, 0.5, log=True))  # fmt: skip
     latent_init: str = option("latent embeddings start random, or shared (one embedding plus "
                               "--ilpo-split-noise)", choices=LATENT_INITS)  # fmt: skip
     split_noise: float = option("noise that splits the shared latent embedding",

@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from abco_train.config.fields import MethodOptions, option
+from abco_train.config.fields import MethodOptions, Search, option
 from abco_train.config.limits import (
     MAX_EPOCHS,
     MAX_ITERATIONS,
@@ -40,6 +40,8 @@ __all__ = ["LAPOOptions", "OPTION_DEFAULTS"]
 class LAPOOptions(MethodOptions):
     """LAPO's settings (:mod:`abco_train.methods.lapo.method` maps them to the paper)."""
 
+    run_search: ClassVar[tuple[str, ...]] = ()  # its learning rates are options of its own
+
     flag_prefix: ClassVar[str] = "lapo-"
 
     rounds: int = option("training rounds, each evaluated: stage 2's steps are spread evenly "
@@ -48,7 +50,8 @@ class LAPOOptions(MethodOptions):
     slots: int = option("latent vectors quantised per codebook", min=1, max=MAX_LATENTS)
     code_dim: int = option("width of a latent vector and of its codes", min=1, max=MAX_WIDTH)
     codes: int = option("codes per codebook", min=2, max=MAX_LATENTS)
-    commitment: float = option("weight of the commitment loss |z - sg(q)|^2", min=0.0)
+    commitment: float = option("weight of the commitment loss |z - sg(q)|^2", min=0.0,
+                               search=Search(0.01, 0.5, log=True))
     ema_decay: float = option("decay of the codebooks' moving averages", min=0.0, max=1.0)
     hidden: int = option("hidden units of the forward model's and the decoder's MLPs",
                          min=1, max=MAX_WIDTH)  # fmt: skip
@@ -56,11 +59,13 @@ class LAPOOptions(MethodOptions):
                        min=1, max=MAX_WIDTH)  # fmt: skip
     model_steps: int = option("Adam steps of the latent IDM and the forward model (stage 1, "
                               "in the first iteration)", min=0, max=MAX_STEPS)  # fmt: skip
-    model_lr: float = option("Adam's learning rate of stage 1", min=0.0, exclusive=True)
+    model_lr: float = option("Adam's learning rate of stage 1", min=0.0, exclusive=True,
+                             search=Search(1e-4, 1e-3, log=True))
     grad_clip: float = option("stage 1's gradient-norm clip", min=0.0, exclusive=True)
     policy_steps: int = option("Adam steps of the latent policy (stage 2), spread evenly over "
                                "the rounds", min=0, max=MAX_STEPS)  # fmt: skip
-    policy_lr: float = option("Adam's learning rate of stage 2", min=0.0, exclusive=True)
+    policy_lr: float = option("Adam's learning rate of stage 2", min=0.0, exclusive=True,
+                              search=Search(5e-5, 1e-3, log=True))
     decoder_epochs: int = option("epochs of the latent -> action decoder over the "
                                  "pre-demonstrations (stage 3, offline)", min=0,
                                  max=MAX_EPOCHS)  # fmt: skip
