@@ -160,7 +160,7 @@ def test_the_trainer_shows_its_rooms() -> None:
     top = sorted(p.name for p in (ROOT / "abco_train").glob("*.py"))
     rooms = sorted(p.parent.name for p in (ROOT / "abco_train").glob("*/__init__.py"))
     assert len(top) <= MAX_TOP_LEVEL_MODULES, top
-    assert rooms == ["bench", "config", "harness", "methods", "networks", "report"]
+    assert rooms == ["bench", "config", "harness", "methods", "networks", "report", "tune"]
 
 
 #: abco_data's rooms, and the most modules beside them at its top level (the dataset API,

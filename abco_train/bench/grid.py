@@ -151,9 +151,7 @@ def run_grid(
         raise ConfigError("the grid has no cell (no env, method or seed given)")
     _check_backend_and_methods(backend, cells, plugins)
     check_method_options([c.method for c in cells], overrides, method_options)
-    for (method, _), (_, chosen) in (tuned or {}).items():
-        if method in {c.method for c in cells}:  # a chosen option the method does not have
-            check_method_options([method], None, dict(chosen))
+    _check_tuned(cells, tuned)
     cores = backends.available_cores()
     local_jobs = max(1, jobs or cores)
     # jobs x threads fill the cores: one thread per cell at one cell per core (threads spin-wait
@@ -163,8 +161,7 @@ def run_grid(
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {escape(out)} is not a folder")
     out.mkdir(parents=True, exist_ok=True)
-    configs = [cell_config(c, out, overrides, threads, method_options, track, tuned)
-               for c in cells]  # fmt: skip
+    configs = [cell_config(c, out, overrides, threads, method_options, track, tuned) for c in cells]
     with grid_lock(out):
         finished = _finished_cells(cells, configs, out)
         rows = _results_so_far(out, cells, configs, finished)
@@ -189,6 +186,13 @@ def run_grid(
               f" {len(session.failed)} failed; wall {summary['wall_s']:.1f}s (cells"
               f" {cell_s:.1f}s); results: {escape(summary['results'])}")  # fmt: skip
     return summary
+
+
+def _check_tuned(cells: Sequence[Cell], tuned: Tuned | None) -> None:
+    """Raise :class:`ConfigError` for a chosen option a method of the grid does not have."""
+    for (method, _), (_, chosen) in (tuned or {}).items():
+        if method in {c.method for c in cells}:
+            check_method_options([method], None, dict(chosen))
 
 
 def _check_backend_and_methods(backend: str, cells: Sequence[Cell], plugins: Sequence[str]

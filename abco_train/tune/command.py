@@ -16,7 +16,8 @@ MAX_TRIALS = 1_000
 
 def add_tune_options(parser: argparse.ArgumentParser) -> None:
     """Add ``abco tune``'s options to ``parser``."""
-    from abco_train.tune.study import BENCHMARK_TRIALS, FAMILIES
+    from abco_train.tune.space import FAMILIES
+    from abco_train.tune.study import BENCHMARK_TRIALS
 
     parser.add_argument("--track", default="headline", metavar="NAME|FILE.toml",
                         help="the track whose tasks are tuned (default headline)")

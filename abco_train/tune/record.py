@@ -207,8 +207,7 @@ def load_choices(path: str | Path, track: Track
     """
     from abco_train.config.fields import ConfigError
     from abco_train.harness.run_folder import RunFolderError, read_capped
-    from abco_train.tune.space import split_params
-    from abco_train.tune.study import FAMILIES
+    from abco_train.tune.space import FAMILIES, split_params
 
     where = f"--choices {escape(path, 200)}"
     try:

@@ -15,7 +15,11 @@ from abco_train.config.fields import Search, search_space
 from abco_train.config.run import RunConfig
 from abco_train.methods.registry import options_class
 
-__all__ = ["method_space", "suggest", "split_params", "describe"]
+__all__ = ["FAMILIES", "method_space", "suggest", "split_params", "describe"]
+
+#: The task families a tuning is split by: the env kinds of
+#: :func:`~abco_train.config.run.env_kind`.
+FAMILIES = ("classic", "maze", "image")
 
 
 def method_space(method: str) -> dict[str, tuple[Search, type]]:

@@ -22,9 +22,9 @@ from abco_train.bench.tasks import Track
 from abco_train.config.fields import ConfigError
 from abco_train.config.run import env_kind
 from abco_train.tune.record import journal, write_record
-from abco_train.tune.space import method_space, split_params, suggest
+from abco_train.tune.space import FAMILIES, method_space, split_params, suggest
 
-__all__ = ["TuneSpec", "SAMPLER_SEED", "STARTUP_TRIALS", "BENCHMARK_TRIALS", "FAMILIES",
+__all__ = ["TuneSpec", "SAMPLER_SEED", "STARTUP_TRIALS", "BENCHMARK_TRIALS",
            "family_tasks", "tune", "trial_runs"]  # fmt: skip
 
 SAMPLER_SEED = 0
@@ -33,8 +33,6 @@ STARTUP_TRIALS = 4
 #: Trials per method and family of the benchmark's rule (``abco tune``'s default); a report
 #: flags a method tuned with fewer.
 BENCHMARK_TRIALS = 8
-#: The task families: the env kinds of :func:`~abco_train.config.run.env_kind`.
-FAMILIES = ("classic", "maze", "image")
 
 
 @dataclass(frozen=True)

@@ -190,9 +190,27 @@ def test_resolved_options_are_the_whole_table():
     assert set(options.to_dict()) == set(OPTION_DEFAULTS["maze"])
     assert (options.latents, options.remap_max_steps, options.pool) == (4, 36, 8)
     ten = ILPOOptions.for_run(RunConfig(env="AbcoMaze10x10-v0", method_options={"latents": 6}))
-    assert (ten.latents, ten.target, ten.remap, ten.remap_max_steps) == (6, "cells", "table", 400)
+    assert (ten.latents, ten.target, ten.remap, ten.remap_max_steps) == (6, "pooled", "table",
+                                                                         400)  # fmt: skip
     classic = ILPOOptions.for_run(RunConfig(env="MountainCar-v0"))
     assert (classic.latents, classic.remap_max_steps, classic.policy_steps) == (3, None, None)
+
+
+@pytest.mark.parametrize(("env", "preset", "target"), [
+    ("AbcoMaze10x10-v0", "cpu", "pooled"),  # every method reads frames through the CNN
+    ("AbcoMaze5x5-v0", "general", "cells"),  # every method reads the maze cell by cell
+    ("AbcoMaze3x3-v0", "cpu", "pooled"),
+    ("CartPole-v1", "cpu", "pooled"),
+])  # fmt: skip
+def test_the_cell_target_goes_with_a_cell_encoder(env, preset, target):
+    """ILPO's forward model sees the maze's cells exactly where the run's encoder does, the
+    other methods' included: a structure prior all methods of a task share, or none."""
+    cfg = resolve_config(RunConfig(env=env, method="ilpo", preset=preset))
+    assert cfg.method_options["target"] == target
+    assert (target == "cells") == (cfg.arch in ("cellnet", "cellplan"))
+    chosen = resolve_config(RunConfig(env="AbcoMaze10x10-v0", method="ilpo",
+                                      method_options={"target": "cells"}))  # fmt: skip
+    assert chosen.method_options["target"] == "cells"  # still an option of its own
 
 
 def test_the_options_module_imports_no_torch():
@@ -334,11 +352,14 @@ def test_forward_model_draws_its_initial_weights_in_its_published_order(cells):
 
 
 def test_the_cell_target_is_one_pattern_for_a_move_anywhere(tiny_data, tmp_path):
-    """10x10's default target: how much each cell changed. A move from a 6-pixel cell to a
-    7-pixel one and one between two 6-pixel cells give the same two values, at the two cells
-    and nowhere else (a fixed 4-pixel pooling cuts the cells at other offsets in each case);
-    a move into the red goal cell changes the same two cells (the goal's by less)."""
-    cfg = resolve_config(_config("AbcoMaze10x10-v0", tiny_data, tmp_path))
+    """The cell target (10x10, ``--ilpo-target cells``): how much each cell changed. A move
+    from a 6-pixel cell to a 7-pixel one and one between two 6-pixel cells give the same two
+    values, at the two cells and nowhere else (a fixed 4-pixel pooling cuts the cells at other
+    offsets in each case); a move into the red goal cell changes the same two cells (the
+    goal's by less)."""
+    cfg = _config("AbcoMaze10x10-v0", tiny_data, tmp_path)
+    cfg.method_options["target"] = "cells"
+    cfg = resolve_config(cfg)
     method = ILPO(cfg, load_training_data(cfg), seed_everything(0))
     assert method.options.target == "cells" and method.expert_targets.shape[1] == 100
     env = gym.make("AbcoMaze10x10-v0")

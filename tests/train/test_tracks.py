@@ -179,3 +179,21 @@ def test_budget_curves_are_the_headline_tasks_with_budgets_multiplied():
         gaifo = {k: v for k, v in base.method_options.get("gaifo", {}).items() if k != "rl_steps"}
         assert {k: v for k, v in task.method_options["gaifo"].items() if k != "rl_steps"} == gaifo
     assert len(bases) == 2
+
+
+def test_every_method_of_a_headline_task_sees_the_same_inputs_and_encoder(tmp_path):
+    """No input or encoder that one method has and another lacks on a task: one ``arch`` per
+    task for every method, ILPO's cell target exactly where that encoder reads cells."""
+    from abco_train.config.run import CELL_ARCHS, RunConfig
+    from abco_train.methods.registry import resolve_config
+
+    track = load_track("headline")
+    for task in track.tasks:
+        cells = plan_track(track, [task.name], track.methods, [1000])
+        seen = {c.method: resolve_config(RunConfig(**cell_config(c, tmp_path, track=track)))
+                for c in cells}  # fmt: skip
+        archs = {cfg.arch for cfg in seen.values()}
+        assert len(archs) == 1, (task.name, archs)
+        cells = seen["ilpo"].method_options["target"] == "cells"
+        assert cells == (archs.pop() in CELL_ARCHS), task.name
+        assert len({cfg.pre_transitions for cfg in seen.values()}) == 1, task.name

@@ -30,7 +30,7 @@ from abco_data.registry import ACTION_COUNTS
 from abco_train.config.envs import env_spaces
 from abco_train.config.fields import ConfigError, MethodOptions, Search, flag_of, option
 from abco_train.config.limits import MAX_ENVS, MAX_EPOCHS, MAX_LATENTS, MAX_STEPS, MAX_WIDTH
-from abco_train.config.run import RunConfig, env_kind
+from abco_train.config.run import CELL_ARCHS, RunConfig, env_kind
 
 __all__ = ["ILPOOptions", "OPTION_DEFAULTS", "ENV_OPTION_DEFAULTS", "TARGETS", "LATENT_INITS",
            "REMAP_MODES", "REMAP_INPUTS"]  # fmt: skip
@@ -68,9 +68,12 @@ class ILPOOptions(MethodOptions):
                            min=1, max=MAX_WIDTH)
     pool: int = option("frames: average-pool the difference image by this factor",
                        min=1, max=MAX_WIDTH)
-    target: str = option("what G predicts on frames: pooled (the pooled difference image) or "
-                         "cells (how much each maze cell changed; mazes only)",
-                         choices=TARGETS)  # fmt: skip
+    target: str | None = option("what G predicts on frames: pooled (the pooled difference "
+                                "image) or cells (how much each maze cell changed; mazes "
+                                "only). Default: cells where the run's encoder reads the maze "
+                                "cell by cell (--arch cellnet/cellplan), else pooled: ILPO "
+                                "sees the maze's cells where every method does",
+                                choices=TARGETS)  # fmt: skip
     exp_weight: float = option("fraction of L_exp's gradient that reaches G (joint schedule "
                                "only)", min=0.0, max=1.0, search=Search(0.0, 1.0)
                                )  # fmt: skip
@@ -110,6 +113,8 @@ class ILPOOptions(MethodOptions):
         defaults = {**OPTION_DEFAULTS[kind], **ENV_OPTION_DEFAULTS.get(name, {})}
         options = cls.resolve(config.method_options, defaults, method)
         options.check(config)
+        if options.target is None:  # the cell prior where the run's encoder has it, only
+            options.target = "cells" if kind == "maze" and config.arch in CELL_ARCHS else "pooled"
         if options.latents is None:  # the env's actions (another env's: read from it)
             options.latents = ACTION_COUNTS.get(name) or env_spaces(config.env).n_actions
         if options.remap_max_steps is None and kind == "maze":
@@ -144,7 +149,7 @@ class ILPOOptions(MethodOptions):
 #: 100-107).
 _CLASSIC_DEFAULTS: dict[str, Any] = {
     "latents": None, "train_steps": 3000, "policy_steps": None, "later_steps": 0,
-    "hidden": 64, "channels": 16, "pool": 1, "target": "pooled", "exp_weight": 0.0,
+    "hidden": 64, "channels": 16, "pool": 1, "target": None, "exp_weight": 0.0,
     "relax": 0.0, "latent_init": "random", "split_noise": 0.01, "remap": "state",
     "remap_input": "effect+embedding", "remap_steps": 500, "remap_envs": 10,
     "remap_epsilon": 0.2, "remap_margin": 0.1, "remap_epochs": 20, "remap_max_steps": None,
@@ -166,9 +171,8 @@ ENV_OPTION_DEFAULTS: dict[str, dict[str, Any]] = {
     # Pooled frames keep at least ~1.6 pixels per cell: 8x8 maps up to 5x5, 16x16 for 10x10.
     "AbcoMaze3x3-v0": {"pool": 8},
     "AbcoMaze5x5-v0": {"pool": 8},
-    # 10x10 (docs/training.md, "ILPO on the 10x10 maze"): cells 6-7 pixels wide, which no
-    # fixed pooling keeps whole, so G predicts how much each cell changes (``target``
-    # "cells", a local G); its latents then mean one move everywhere, and a table maps them.
-    "AbcoMaze10x10-v0": {"pool": 4, "target": "cells", "relax": 0.05, "remap": "table",
-                         "policy_steps": 10000},
+    # 10x10 (docs/notes/ilpo-tuning.md, "ILPO on the 10x10 maze"): chosen with the cell
+    # target (``--ilpo-target cells``, a local G), whose latents mean one move everywhere and
+    # a table maps them. The target itself follows the run's encoder (``target`` above).
+    "AbcoMaze10x10-v0": {"pool": 4, "relax": 0.05, "remap": "table", "policy_steps": 10000},
 }
