@@ -26,6 +26,7 @@ import numpy as np
 
 from abco_train.bench.records import escape
 from abco_train.harness.plots import pyplot, save_figure
+from abco_train.report.budget_verdicts import verdict_lines
 from abco_train.report.headline import Cell, split_tracks, task_cells
 from abco_train.report.runs import ReportError, Run, load_runs, method_order
 from abco_train.report.tables import count_text, fmt, stat_row
@@ -119,6 +120,7 @@ def section(data: Curves, out: Path, labels: Mapping[str, str],
                     csv_rows.append(stat_row("budget_curve", base, method, f"budget {budget}",
                                              "score", cell.stats))  # fmt: skip
         lines.append("")
+    lines += [*verdict_lines(data, labels), ""]
     return lines, _plot(data, out / BUDGET_CURVES_PNG, labels)
 
 

@@ -57,6 +57,9 @@ def test_report_draws_the_curves(grids: tuple[Path, Path]) -> None:
     text = (main_dir / "report" / "report.md").read_text()
     assert "## Budget curves" in text and "### acro" in text
     assert "| 1,000 | 4,000 | 16,000 |" in text
+    # ABCO ahead of GAIfO at 1x and 4x; at 16x GAIfO's seeds straddle it: undecided
+    assert "| ABCO(α) vs GAIfO | better | better | undecided | no |" in text
+    assert "0 of 1 pair(s) keep their verdict at every budget." in text
     # the curve's own row, not the benchmark's table of mean scores above it
     curves = text.split("## Budget curves", 1)[1]
     row = next(line for line in curves.splitlines() if line.startswith("| GAIfO"))

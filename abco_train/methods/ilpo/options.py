@@ -84,7 +84,8 @@ class ILPOOptions(MethodOptions):
     split_noise: float = option("noise that splits the shared latent embedding",
                                 min=0.0, max=1.0)  # fmt: skip
     remap: str = option("action remapping: state (a classifier P(a | s, z)) or table (counts "
-                        "P(a | z))", choices=REMAP_MODES)  # fmt: skip
+                        "P(a | z))", choices=REMAP_MODES,
+                        search=Search(choices=REMAP_MODES))  # fmt: skip
     remap_input: str = option("what the remapping classifier reads besides onehot(z): "
                               "effect (what z does in s), embedding (E(s)) or both",
                               choices=REMAP_INPUTS)  # fmt: skip
