@@ -66,7 +66,8 @@ def test_resolved_options_are_stored_whole() -> None:
     cfg = resolve_config(RunConfig(env="AbcoMaze10x10-v0", method_options={"idm_epochs": 7}))
     assert cfg.method_options == asdict(BCOOptions(
         idm_input="difference", idm_epochs=7, idm_patience=1, idm_samples=20_000,
-        policy_epochs=10, first_epochs_factor=3))  # fmt: skip
+        policy_epochs=10, first_epochs_factor=3, schedule="epochs", check_updates=100,
+        patience_checks=5, min_fit_updates=500, max_fit_updates=20_000))  # fmt: skip
 
 
 def test_flags_follow_the_method(capsys: pytest.CaptureFixture[str]) -> None:
@@ -99,10 +100,14 @@ def test_a_folder_from_before_the_options_moved_is_still_recognised(tmp_path: Pa
     old = {k: v for k, v in asdict(new).items() if k != "method_options"}
     old.update(new.method_options)  # the settings stood at the top level then
     old["method_options"] = {}
-    # the moved settings, and options added since (idm_reinit), which old folders lack
-    assert set(new.method_options) - set(MOVED_TO_METHOD_OPTIONS) == {"idm_reinit"}
+    # the moved settings, and options added since (idm_reinit, the schedule's), which old
+    # folders lack
+    added = {"idm_reinit", "schedule", "check_updates", "patience_checks", "min_fit_updates",
+             "max_fit_updates"}  # fmt: skip
+    assert set(new.method_options) - set(MOVED_TO_METHOD_OPTIONS) == added
     assert set(MOVED_TO_METHOD_OPTIONS) <= set(new.method_options)
-    old.pop("idm_reinit")
+    for name in added:
+        old.pop(name)
     (tmp_path / "config.json").write_text(json.dumps(old))
     final = {"env": "CartPole-v1", "method": "bco", "seed": 0, "status": "ok",
              "episodes": {"performance": 1.0, "aer": 500.0, "success_rate": 1.0, "episodes": 5}}

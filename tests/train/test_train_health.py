@@ -14,6 +14,7 @@ from abco_train.bench import grid
 from abco_train.config.run import RunConfig
 from abco_train.harness.loop import train
 from abco_train.methods.bco import family as abco_module
+from abco_train.methods.bco import idm as idm_module
 from abco_train.methods.bco.fitting import validation_split
 from abco_train.methods.registry import resolve_config
 from abco_train.networks.builders import build_networks
@@ -63,7 +64,7 @@ def test_an_idm_at_chance_is_reported_and_the_run_goes_on(tiny_data, tmp_path, m
         return {"accuracy": 0.0, "class_accuracy": [0.0, 0.0]}
 
     monkeypatch.setattr(abco_module.BCOFamily, "validate_idm", dead)
-    monkeypatch.setattr(abco_module, "MIN_JUDGED", 0)
+    monkeypatch.setattr(idm_module, "MIN_JUDGED", 0)
     cfg = tiny_config("CartPole-v1", "abco", tiny_data, tmp_path / "run")
     final = train(cfg)
     assert final["status"] == "ok" and np.isfinite(final["episodes"]["score"])

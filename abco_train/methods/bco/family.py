@@ -55,7 +55,7 @@ partial sampling), and Table 2's ablations: ``attention`` (attention, BCO(alpha)
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 import torch
@@ -65,27 +65,21 @@ from abco_train.config.run import RunConfig
 from abco_train.harness.rollouts import Rollouts
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method
-from abco_train.methods.bco.fitting import VALIDATION_CAP, fit, predict, validation_split
-from abco_train.methods.bco.health import DEAD_MARGIN, MIN_JUDGED, at_chance, label_health
-from abco_train.methods.bco.options import VARIANTS, BCOOptions
+from abco_train.methods.bco.converged import Schedule, expert_split, fit_converged
+from abco_train.methods.bco.fitting import fit, predict, validation_split
+from abco_train.methods.bco.health import DEAD_MARGIN, MIN_JUDGED, label_health
+from abco_train.methods.bco.idm import IDMTraining
+from abco_train.methods.bco.options import VARIANTS, BCOOptions, resolved
 from abco_train.methods.bco.sampling import sample_training_set
 from abco_train.methods.registry import register
 from abco_train.networks.builders import build_networks, data_statistics
 
 __all__ = ["VARIANTS", "BCOFamily", "DEAD_MARGIN", "MIN_JUDGED"]
 
-_T = TypeVar("_T")
-
-
-def _resolved(value: _T | None) -> _T:
-    """A setting that is ``None`` only before resolution (the run config's and the schedule
-    options that ``BCOOptions.for_run`` fills in)."""
-    assert value is not None, "a setting read before the config and options were resolved"
-    return value
 
 
 @register(*VARIANTS)
-class BCOFamily(Method):
+class BCOFamily(IDMTraining, Method):
     """BC, BCO, BCO(alpha) and ABCO(alpha): one implementation with the switches of
     :data:`VARIANTS` (see the module docstring)."""
 
@@ -115,15 +109,15 @@ class BCOFamily(Method):
         self.augment = self.options.augment == "transpose"
         self.policy, self.idm = build_networks(
             data.observation_space, data.n_actions, config.arch, bool(config.attention),
-            _resolved(self.options.idm_input), **stats,
+            resolved(self.options.idm_input), **stats,
         )
         # Networks and observations live on the run's device: on a GPU the frames (a maze's
         # as what draws them, a few bytes a row) move there once and minibatches are gathered
         # there. Indices and labels stay in CPU memory, where the sampling draws them.
         self.device = torch.device(config.device)
         self.policy, self.idm = self.policy.to(self.device), self.idm.to(self.device)
-        self.policy_opt = torch.optim.Adam(self.policy.parameters(), lr=_resolved(config.lr))
-        self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=_resolved(config.lr))
+        self.policy_opt = torch.optim.Adam(self.policy.parameters(), lr=resolved(config.lr))
+        self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=resolved(config.lr))
         # -- data as torch tensors (no copies) ------------------------------------------------
         self.pre_obs = frames_tensor(data.pre_obs, self.device)
         if self.idm_data is None:  # BC has no IDM to measure
@@ -140,6 +134,15 @@ class BCOFamily(Method):
         self.chance = float(shares.max())
         self.expert_obs = frames_tensor(data.expert_obs, self.device)
         self.expert_t = torch.from_numpy(data.expert_t)
+        # -- the schedule: epochs, or each fit until its held-out score stops improving ------
+        self.schedule = None
+        rows, held = np.arange(len(data.expert_t)), np.zeros(0, dtype=np.int64)
+        if self.options.schedule == "converged":
+            o = self.options
+            self.schedule = Schedule(resolved(o.check_updates), resolved(o.patience_checks),
+                                     resolved(o.min_fit_updates), resolved(o.max_fit_updates))
+            rows, held = expert_split(len(data.expert_t), config.seed)  # the policy's check
+        self.policy_rows, self.policy_held = torch.from_numpy(rows), torch.from_numpy(held)
         # -- I_pos (accumulated post-demonstrations) and the current I_s ----------------------
         self.pos_obs = torch.zeros((0, *data.pre_obs.shape[1:]), dtype=self.pre_obs.dtype,
                                    device=self.device)
@@ -155,17 +158,17 @@ class BCOFamily(Method):
     @property
     def num_iterations(self) -> int:
         """``alpha + 1`` for iterative variants, else 1."""
-        return int(_resolved(self.config.iterations)) + 1 if self.iterative else 1
+        return int(resolved(self.config.iterations)) + 1 if self.iterative else 1
 
     # -- Algorithm 1, one iteration ---------------------------------------------------------
 
     def train_iteration(self, iteration: int) -> dict[str, float]:
         """Improve the IDM on ``I_s``, label the expert pairs, clone them into the policy."""
         cfg, stats = self.config, {}
-        factor = _resolved(self.options.first_epochs_factor)
+        factor = resolved(self.options.first_epochs_factor)
         boost = factor if iteration == 0 else 1
         # One-iteration variants get the iterative ones' whole policy budget (equal epochs).
-        units = boost if self.iterative else factor + _resolved(cfg.iterations)
+        units = boost if self.iterative else factor + resolved(cfg.iterations)
         policy_epochs, policy_updates = self._policy_budget(units)
         expert_n = len(self.expert_t)
         true = torch.from_numpy(self.data.expert_eval_actions)
@@ -174,31 +177,52 @@ class BCOFamily(Method):
         else:
             if iteration == 0 or self.idm_data != "pre":
                 idm_set = len(self.s_pre) + len(self.s_pos)
-                idm_epochs = self._floored(_resolved(self.options.idm_epochs), idm_set)
+                idm_epochs = self._floored(resolved(self.options.idm_epochs), idm_set)
                 stats.update(self._train_idm_checked(idm_epochs * boost))
                 stats["idm_samples"] = int(len(self.s_pre) + len(self.s_pos))
             labels = predict(self.idm, self._expert_pairs, expert_n, device=self.device)
             stats["idm_expert_accuracy"] = float((labels == true).float().mean())
             stats.update(label_health(labels.numpy(), self.data.n_actions))
         self.labels = labels.numpy()
-        stats["policy_loss"] = fit(
-            self.policy, self.policy_opt, lambda idx: (self.expert_obs[self.expert_t[idx]],),
-            labels, policy_epochs, _resolved(cfg.batch_size), self.rng, "policy", cfg.quiet,
-            self.device, self.augment, policy_updates,
-        )  # fmt: skip
-        stats["policy_epochs"] = policy_epochs
-        stats["policy_updates"] = policy_updates
+        stats.update(self._fit_policy(labels, policy_epochs, policy_updates))
         predicted = predict(self.policy, lambda idx: (self.expert_obs[self.expert_t[idx]],),
                              expert_n, device=self.device)  # fmt: skip
         stats["policy_label_accuracy"] = float((predicted == labels).float().mean())
         return stats
 
+    def _fit_policy(self, labels: torch.Tensor, epochs: int, updates: int) -> dict[str, Any]:
+        """Clone ``labels`` into the policy: ``epochs`` (at most ``updates`` minibatches), or
+        with the converged schedule until its agreement with the labels of the held-out
+        expert transitions stops improving."""
+        rows, held, batch = self.policy_rows, self.policy_held, resolved(self.config.batch_size)
+        common = {"desc": "policy", "quiet": self.config.quiet, "device": self.device,
+                  "augment": self.augment}  # fmt: skip
+
+        def states(subset: torch.Tensor) -> Any:
+            return lambda idx: (self.expert_obs[self.expert_t[subset[idx]]],)
+
+        if self.schedule is None:
+            loss = fit(self.policy, self.policy_opt, states(rows), labels[rows], epochs, batch,
+                       self.rng, max_batches=updates, **common)  # fmt: skip
+            return {"policy_loss": loss, "policy_epochs": epochs, "policy_updates": updates}
+
+        def agreement() -> float:
+            if len(held) == 0:
+                return float("nan")
+            pred = predict(self.policy, states(held), len(held), device=self.device)
+            return float((pred == labels[held]).float().mean())
+
+        out = fit_converged(self.policy, self.policy_opt, states(rows), labels[rows], agreement,
+                            self.schedule, batch, self.rng, **common)  # fmt: skip
+        return {"policy_loss": out["loss"], "policy_updates": int(out["updates"]),
+                "policy_held_out_agreement": out["best"]}
+
     def _policy_budget(self, units: int) -> tuple[int, int]:
         """Epochs and minibatch updates of ``units`` policy units: ``policy_epochs`` each
         (floored with ``min_updates``), a unit cut to ``max_updates`` updates where one makes
         more (the last epoch then stops part-way)."""
-        per_epoch = -(-len(self.expert_t) // _resolved(self.config.batch_size))
-        epochs = self._floored(_resolved(self.options.policy_epochs), len(self.expert_t))
+        per_epoch = -(-len(self.expert_t) // resolved(self.config.batch_size))
+        epochs = self._floored(resolved(self.options.policy_epochs), len(self.expert_t))
         per_unit = epochs * per_epoch
         if self.options.max_updates:
             per_unit = min(per_unit, self.options.max_updates)
@@ -210,111 +234,12 @@ class BCOFamily(Method):
         least = self.options.min_updates
         if not least or not examples:
             return epochs
-        per_epoch = -(-examples // _resolved(self.config.batch_size))
+        per_epoch = -(-examples // resolved(self.config.batch_size))
         return max(epochs, -(-least // per_epoch))
 
     def _expert_pairs(self, idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         rows = self.expert_t[idx]
         return self.expert_obs[rows], self.expert_obs[rows + 1]
-
-    # -- the IDM: early stopping on held-out pre-demonstrations, and the dead-IDM rule ------
-
-    @torch.no_grad()
-    def validate_idm(self) -> dict[str, Any]:
-        """Accuracy of the IDM on the held-out pre-demonstrations, overall and per class."""
-        if len(self.val_t) == 0:
-            return {"accuracy": float("nan"), "class_accuracy": []}
-        pred = predict(self.idm, lambda idx: (self.pre_obs[self.val_t[idx]],
-                                               self.pre_obs[self.val_t[idx] + 1]),
-                        len(self.val_t), device=self.device)  # fmt: skip
-        hits = (pred == self.val_actions).numpy()
-        truth = self.val_actions.numpy()
-        per_class = [float(hits[truth == c].mean()) if (truth == c).any() else float("nan")
-                     for c in range(self.data.n_actions)]  # fmt: skip
-        return {"accuracy": float(hits.mean()), "class_accuracy": per_class}
-
-    def _train_idm_checked(self, max_epochs: int) -> dict[str, Any]:
-        """Train the IDM with early stopping and measure its health, which never stops the
-        run (:mod:`abco_train.methods.bco.health`); with ``idm_reinit`` an IDM at chance is
-        re-initialised and trained once more."""
-        loss, epochs = self._train_idm(max_epochs)
-        health, reinitialised = self.validate_idm(), 0
-        if self.options.idm_reinit and self._at_chance(health):
-            self._new_idm()  # fresh weights from the run's torch generator, then once more
-            loss, epochs = self._train_idm(max_epochs)
-            health, reinitialised = self.validate_idm(), 1
-        return {"idm_loss": loss, "idm_epochs": epochs, "idm_val_accuracy": health["accuracy"],
-                "idm_val_class_accuracy": health["class_accuracy"], "idm_chance": self.chance,
-                "idm_at_chance": self._at_chance(health), "idm_reinitialised": reinitialised,
-                "idm_train_accuracy": self._train_accuracy()}  # fmt: skip
-
-    def _at_chance(self, health: dict[str, Any]) -> bool:
-        return at_chance(health["accuracy"], self.chance, len(self.val_t), MIN_JUDGED)
-
-    @torch.no_grad()
-    def _train_accuracy(self) -> float:
-        """The IDM's accuracy on its own ``I_s`` (``VALIDATION_CAP`` evenly spaced transitions
-        at most): one fitting the policy's runs may be at chance on random actions only."""
-        n = len(self.s_pre) + len(self.s_pos)
-        if n == 0:
-            return float("nan")
-        rows = torch.linspace(0, n - 1, min(n, VALIDATION_CAP)).long()
-        pairs, labels = self._idm_set()
-        pred = predict(self.idm, lambda idx: pairs(rows[idx]), len(rows), device=self.device)
-        return float((pred == labels[rows]).float().mean())
-
-    def _new_idm(self) -> None:
-        _, idm = build_networks(self.data.observation_space, self.data.n_actions,
-                                self.config.arch, bool(self.config.attention),
-                                _resolved(self.options.idm_input), **self.net_stats)  # fmt: skip
-        self.idm = idm.to(self.device)
-        self.idm_opt = torch.optim.Adam(self.idm.parameters(), lr=_resolved(self.config.lr))
-
-    def _train_idm(self, max_epochs: int) -> tuple[float, int]:
-        """Epochs of the IDM over ``I_s = I_pre[s_pre] + I_pos[s_pos]`` until the held-out
-        accuracy stops improving (``idm_patience``) or ``max_epochs``; the best weights are
-        kept. Returns the last epoch's mean loss and the epochs run."""
-        best, best_state, stale, loss, epochs = -1.0, None, 0, float("nan"), 0
-        for epoch in range(1, max_epochs + 1):
-            epochs, loss = epoch, self._idm_epoch()
-            accuracy = self.validate_idm()["accuracy"]
-            if np.isnan(accuracy) or accuracy > best:
-                best, stale = accuracy, 0
-                best_state = {k: v.detach().clone() for k, v in self.idm.state_dict().items()}
-            else:
-                stale += 1
-            if stale >= _resolved(self.options.idm_patience):
-                break
-        if best_state is not None:
-            self.idm.load_state_dict(best_state)
-        return loss, epochs
-
-    def _idm_epoch(self) -> float:
-        """One cross-entropy epoch of the IDM over ``I_s = I_pre[s_pre] + I_pos[s_pos]``."""
-        pairs, labels = self._idm_set()
-        return fit(self.idm, self.idm_opt, pairs, labels, 1, _resolved(self.config.batch_size),
-                    self.rng, "IDM", self.config.quiet, self.device, self.augment)  # fmt: skip
-
-    def _idm_set(self) -> tuple[Any, torch.Tensor]:
-        """``I_s``: its minibatch function (indices -> ``(s, s')``) and its action labels."""
-        n_pre = len(self.s_pre)
-        labels = torch.cat([self.pre_actions[self.s_pre], self.pos_actions[self.s_pos]])
-
-        def pairs(idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-            if n_pre == len(labels):  # I_s from I_pre alone: one gather per frame
-                rows = self.pre_t[self.s_pre[idx]]
-                return self.pre_obs[rows], self.pre_obs[rows + 1]
-            is_pre = idx < n_pre
-            s = torch.empty((len(idx), *self.pre_obs.shape[1:]), dtype=self.pre_obs.dtype,
-                            device=self.device)
-            s1 = torch.empty_like(s)
-            rows = self.pre_t[self.s_pre[idx[is_pre]]]
-            s[is_pre], s1[is_pre] = self.pre_obs[rows], self.pre_obs[rows + 1]
-            rows = self.pos_t[self.s_pos[idx[~is_pre] - n_pre]]
-            s[~is_pre], s1[~is_pre] = self.pos_obs[rows], self.pos_obs[rows + 1]
-            return s, s1
-
-        return pairs, labels
 
     # -- post-demonstrations and the next I_s --------------------------------------------------
 

@@ -18,20 +18,32 @@ Example:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import abco_envs
 from abco_train.config.fields import ConfigError, MethodOptions, Search, option
 from abco_train.config.limits import MAX_EPOCHS, MAX_PRE_TRANSITIONS, MAX_STEPS
 from abco_train.config.run import CELL_ARCHS, IDM_INPUTS, RunConfig, env_kind
 
-__all__ = ["BCOOptions", "VARIANTS", "AUGMENTS", "DEFAULTS", "PRESET_DEFAULTS", "ENV_DEFAULTS",
-           "REGIME_DEFAULTS"]  # fmt: skip
+__all__ = ["BCOOptions", "VARIANTS", "AUGMENTS", "SCHEDULES", "resolved", "DEFAULTS",
+           "PRESET_DEFAULTS", "ENV_DEFAULTS", "REGIME_DEFAULTS"]  # fmt: skip
 
 #: Training-time data augmentation: ``none``, or ``transpose`` (mazes: each minibatch
 #: example is transposed about the main diagonal with probability 1/2, actions mapped
 #: N<->W, S<->E; start and goal stay where they are).
 AUGMENTS = ("none", "transpose")
+#: How the two networks' fits end: ``epochs`` (their epoch counts, early stopping of the IDM
+#: by epochs) or ``converged`` (:mod:`abco_train.methods.bco.converged`).
+SCHEDULES = ("epochs", "converged")
+
+_T = TypeVar("_T")
+
+
+def resolved(value: _T | None) -> _T:
+    """A setting that is ``None`` only before resolution (the run config's and the schedule
+    options that ``BCOOptions.for_run`` fills in)."""
+    assert value is not None, "a setting read before the config and options were resolved"
+    return value
 
 #: Method switches: (train the IDM, attention, how I_s is built after iteration 0).
 #: ``idm_data``: "pre" = I_pre only (BCO(0)), "pos" = all post-demonstrations (BCO(alpha)),
@@ -82,6 +94,19 @@ class BCOOptions(MethodOptions):
                                      "at most this many minibatch updates (default: 1000 for "
                                      "the general preset, else none)",
                                      min=1, max=MAX_STEPS)  # fmt: skip
+    schedule: str | None = option("how each fit of both networks ends: epochs (their epoch "
+                                  "counts) or converged (when its held-out score stops "
+                                  "improving: --check-updates, --patience-checks, "
+                                  "--min-fit-updates, --max-fit-updates)",
+                                  choices=SCHEDULES)  # fmt: skip
+    check_updates: int | None = option("converged: minibatch updates between held-out checks",
+                                       min=1, max=MAX_STEPS)
+    patience_checks: int | None = option("converged: stop after this many checks without a "
+                                         "better held-out score", min=1, max=MAX_STEPS)
+    min_fit_updates: int | None = option("converged: at least this many updates per fit",
+                                         min=1, max=MAX_STEPS)
+    max_fit_updates: int | None = option("converged: at most this many updates per fit",
+                                         min=1, max=MAX_STEPS)
     augment: str | None = option("training-time augmentation: none, or transpose (mazes: "
                                  "transpose half of each minibatch about the main diagonal, "
                                  "actions N<->W, S<->E) (default: transpose for the general "
@@ -127,6 +152,9 @@ class BCOOptions(MethodOptions):
         if self.min_updates and self.max_updates and self.min_updates > self.max_updates:
             raise ConfigError(f"--min-updates {self.min_updates} is above --max-updates "
                               f"{self.max_updates}: a policy unit cannot make both")  # fmt: skip
+        if (self.min_fit_updates or 0) > (self.max_fit_updates or self.min_fit_updates or 0):
+            raise ConfigError(f"--min-fit-updates {self.min_fit_updates} is above "
+                              f"--max-fit-updates {self.max_fit_updates}")  # fmt: skip
         if kind != "maze" and self.augment not in (None, "none"):
             raise ConfigError(f"--augment {self.augment} is for maze frames; {config.env} "
                               "takes --augment none")  # fmt: skip
@@ -139,6 +167,13 @@ DEFAULTS: dict[str, dict[str, Any]] = {
     "classic": {"idm_input": "difference", "idm_epochs": 2, "idm_patience": 1,
                 "policy_epochs": 4, "first_epochs_factor": 2, "idm_samples": 50_000},
 }  # fmt: skip
+#: The converged schedule's checks (every kind): 100 updates a window, five windows of
+#: patience, 500 to 20,000 updates a fit. Not yet chosen on validation seeds: ``epochs`` stays
+#: the default schedule until a validation study picks one.
+_CONVERGED = {"schedule": "epochs", "check_updates": 100, "patience_checks": 5,
+              "min_fit_updates": 500, "max_fit_updates": 20_000}
+for _kind in DEFAULTS:
+    DEFAULTS[_kind].update(_CONVERGED)
 DEFAULTS["image"] = DEFAULTS["maze"]  # other image envs: the mazes' schedule
 
 #: Changes by (env kind, preset). ``paper``: the paper's ResNet-18 reads each frame apart.

@@ -1,0 +1,79 @@
+"""The BCO family's converged schedule: a fit stops when its held-out score stops improving
+(never before its minimum of updates, never after its maximum) and keeps its best weights;
+the expert split is fixed by the seed; runs of every variant train with it end to end."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from train_testing import tiny_config
+
+from abco_train.harness.loop import train
+from abco_train.methods.bco.converged import Schedule, expert_split, fit_converged
+
+
+def _problem(n: int = 256) -> tuple[torch.nn.Module, torch.Tensor, torch.Tensor]:
+    torch.manual_seed(0)
+    x = torch.randn(n, 2)
+    y = (x[:, 0] > 0).long()  # separable: a linear net gets there fast
+    return torch.nn.Linear(2, 2), x, y
+
+
+def _fit(net, x, y, score, schedule):
+    opt = torch.optim.Adam(net.parameters(), lr=0.05)
+    return fit_converged(net, opt, lambda idx: (x[idx],), y, score, schedule, 32,
+                         np.random.default_rng(0))  # fmt: skip
+
+
+def test_a_fit_stops_once_its_score_stops_improving_and_keeps_its_best_weights():
+    net, x, y = _problem()
+    scores = iter([0.5, 0.7, 0.9, 0.8, 0.8, 0.8] + [0.1] * 100)
+    seen = []
+
+    def score() -> float:
+        seen.append({k: v.clone() for k, v in net.state_dict().items()})
+        return next(scores)
+
+    out = _fit(net, x, y, score, Schedule(check_updates=10, patience_checks=3, min_updates=1,
+                                          max_updates=10_000))  # fmt: skip
+    assert out["updates"] == 60 and out["best"] == 0.9  # three checks after the best, then out
+    assert all(torch.equal(net.state_dict()[k], seen[2][k]) for k in seen[2])
+
+
+@pytest.mark.parametrize(("patience", "low", "high", "expected"), [
+    (1, 200, 10_000, 200),  # impatient, but not before the minimum
+    (100, 1, 35, 35),  # patient: the maximum ends it, part-way through a window
+])  # fmt: skip
+def test_the_minimum_and_maximum_of_updates_hold(patience, low, high, expected):
+    net, x, y = _problem()
+    out = _fit(net, x, y, lambda: 0.5, Schedule(10, patience, low, high))  # never better
+    assert out["updates"] == expected
+
+
+def test_the_expert_split_is_the_seeds_own():
+    train_a, held_a = expert_split(100, seed=3)
+    train_b, held_b = expert_split(100, seed=3)
+    assert np.array_equal(held_a, held_b) and len(held_a) == 10
+    assert not np.array_equal(held_a, expert_split(100, seed=4)[1])
+    assert sorted([*train_a, *held_a]) == list(range(100))
+    assert len(expert_split(1, seed=0)[1]) == 0  # one transition: nothing to hold out
+
+
+@pytest.mark.parametrize("method", ["bc", "bco", "abco"])
+def test_runs_train_to_convergence_end_to_end(method, tiny_data, tmp_path):
+    options = {"schedule": "converged", "check_updates": 5, "patience_checks": 2,
+               "min_fit_updates": 10, "max_fit_updates": 60}  # fmt: skip
+    cfg = tiny_config("CartPole-v1", method, tiny_data, tmp_path / method,
+                      method_options=options, iterations=1)  # fmt: skip
+    train(cfg)
+    rows = [json.loads(line) for line in (tmp_path / method / "metrics.jsonl").open()]
+    for row in rows:
+        stats = row["train"]
+        assert 10 <= stats["policy_updates"] <= 60 and "policy_epochs" not in stats
+        assert 0.0 <= stats["policy_held_out_agreement"] <= 1.0
+        if method != "bc" and "idm_updates" in stats:
+            assert 10 <= stats["idm_updates"] <= 60 and "idm_epochs" not in stats
+    assert any("idm_updates" in r["train"] for r in rows) == (method != "bc")
