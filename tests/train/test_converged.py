@@ -62,11 +62,14 @@ def test_the_expert_split_is_the_seeds_own():
     assert len(expert_split(1, seed=0)[1]) == 0  # one transition: nothing to hold out
 
 
-@pytest.mark.parametrize("method", ["bc", "bco", "abco"])
-def test_runs_train_to_convergence_end_to_end(method, tiny_data, tmp_path):
+@pytest.mark.parametrize(("env", "method"), [
+    ("CartPole-v1", "bc"), ("CartPole-v1", "bco"), ("CartPole-v1", "abco"),
+    ("AbcoMaze3x3-v0", "iupe"),
+])  # fmt: skip
+def test_runs_train_to_convergence_end_to_end(env, method, tiny_data, tmp_path):
     options = {"schedule": "converged", "check_updates": 5, "patience_checks": 2,
                "min_fit_updates": 10, "max_fit_updates": 60}  # fmt: skip
-    cfg = tiny_config("CartPole-v1", method, tiny_data, tmp_path / method,
+    cfg = tiny_config(env, method, tiny_data, tmp_path / method,
                       method_options=options, iterations=1)  # fmt: skip
     train(cfg)
     rows = [json.loads(line) for line in (tmp_path / method / "metrics.jsonl").open()]

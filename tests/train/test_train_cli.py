@@ -111,7 +111,8 @@ def test_damaged_run_folder(tiny_data, tmp_path, capsys) -> None:
             "--expert-data", cfg.expert_data, "--pre-data", cfg.pre_data, "--quiet"]
     other = ["--iterations", "1", "--idm-epochs", "1", "--policy-epochs", "1",
              "--first-epochs-factor", "1", "--eval-layouts", "2", "--eval-episodes", "2",
-             "--plot-layouts", "2", "--eval-max-steps", "30", "--no-plots"]  # fmt: skip
+             "--plot-layouts", "2", "--eval-max-steps", "30", "--no-plots",
+             "--schedule", "epochs"]  # fmt: skip
     assert main([*args, *other]) == 2
     err = capsys.readouterr().err
     assert "checkpoint.pt is damaged" in err and err.count("\n") == 1

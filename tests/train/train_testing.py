@@ -7,7 +7,7 @@ from typing import Any
 import abco_data
 import abco_envs
 from abco_train.config.run import RunConfig
-from abco_train.methods.registry import config_from_record
+from abco_train.methods.registry import config_from_record, options_class
 
 TINY = {
     "maze_expert": {"layouts": 2, "solutions_per_layout": 1, "reference_episodes": 2},
@@ -46,6 +46,8 @@ def tiny_config(env_id, method, data, run_dir, **changes) -> RunConfig:
         plots=False,
     )
     values.update(changes)
+    if "schedule" in options_class(method).names():  # tiny epochs, not a converged schedule
+        values["method_options"] = {"schedule": "epochs", **(values.get("method_options") or {})}
     return config_from_record(values)  # BCO options may be given as keywords
 
 
@@ -61,7 +63,8 @@ def train_argv(cfg: Any, **changes: Any) -> list[str]:
     values = {"env": cfg.env, "method": cfg.method, "seed": cfg.seed, "run-dir": cfg.run_dir,
               "expert-data": cfg.expert_data, "pre-data": cfg.pre_data, "iterations": 1,
               "idm-epochs": 1, "policy-epochs": 1, "first-epochs-factor": 1, "eval-layouts": 2,
-              "eval-episodes": 2, "plot-layouts": 2, "eval-max-steps": 30, **changes}
+              "eval-episodes": 2, "plot-layouts": 2, "eval-max-steps": 30, "schedule": "epochs",
+              **changes}
     return ["train", "--quiet", "--no-plots",
             *[x for k, v in values.items() for x in (f"--{k}", str(v))]]
 
