@@ -190,8 +190,9 @@ def run_grid(
 
 def _check_tuned(cells: Sequence[Cell], tuned: Tuned | None) -> None:
     """Raise :class:`ConfigError` for a chosen option a method of the grid does not have."""
+    methods = {c.method for c in cells}
     for (method, _), (_, chosen) in (tuned or {}).items():
-        if method in {c.method for c in cells}:
+        if method in methods:
             check_method_options([method], None, dict(chosen))
 
 

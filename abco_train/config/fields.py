@@ -75,6 +75,14 @@ class Search:
             return trial.suggest_int(name, int(self.low), int(self.high), log=self.log)
         return trial.suggest_float(name, float(self.low), float(self.high), log=self.log)
 
+    def contains(self, value: Any, kind: type) -> bool:
+        """Whether ``value`` is one a tuner could have chosen for a setting of type ``kind``."""
+        if self.choices:
+            return value in self.choices
+        if isinstance(value, bool) or not isinstance(value, int if kind is int else (int, float)):
+            return False
+        return self.low <= value <= self.high
+
     def describe(self, kind: type) -> str:
         """The range in words."""
         if self.choices:

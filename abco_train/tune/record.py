@@ -255,13 +255,6 @@ def _check_params(method: str, params: dict[str, Any], where: str) -> None:
             raise ConfigError(f"{where}: {escape(method, 80)} has no tunable setting "
                               f"{escape(name, 80)!r}")  # fmt: skip
         search, kind = space[name]
-        if search.choices:
-            ok = value in search.choices
-        elif kind is int:
-            ok = type(value) is int and search.low <= value <= search.high
-        else:
-            ok = (isinstance(value, (int, float)) and not isinstance(value, bool)
-                  and search.low <= value <= search.high)  # fmt: skip
-        if not ok:
+        if not search.contains(value, kind):
             raise ConfigError(f"{where}: {escape(method, 80)}'s {name} = "
                               f"{escape(value, 40)} is outside {search.describe(kind)}")

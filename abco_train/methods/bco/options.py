@@ -160,23 +160,23 @@ class BCOOptions(MethodOptions):
                               "takes --augment none")  # fmt: skip
 
 
+#: The converged schedule's checks (every kind): 100 updates a window, five windows of
+#: patience, 500 to 20,000 updates a fit.
+_CONVERGED = {"check_updates": 100, "patience_checks": 5, "min_fit_updates": 500,
+              "max_fit_updates": 20_000}
 #: Defaults by env kind: mazes train on 64x64 RGB frames, classic control on state vectors.
+#: Vector tasks train to convergence: on the headline track's four classic tasks, validation
+#: seeds 100-102, the five IfO methods of the family averaged 0.796 with it against 0.307 with
+#: the epoch counts, every method higher (docs/notes/fair-fight.md). Images keep their epochs
+#: until a study on them decides.
 DEFAULTS: dict[str, dict[str, Any]] = {
     "maze": {"idm_input": "difference", "idm_epochs": 4, "idm_patience": 1, "policy_epochs": 3,
-             "first_epochs_factor": 3, "idm_samples": 20_000},
+             "first_epochs_factor": 3, "idm_samples": 20_000, "schedule": "epochs",
+             **_CONVERGED},
     "classic": {"idm_input": "difference", "idm_epochs": 2, "idm_patience": 1,
-                "policy_epochs": 4, "first_epochs_factor": 2, "idm_samples": 50_000},
+                "policy_epochs": 4, "first_epochs_factor": 2, "idm_samples": 50_000,
+                "schedule": "converged", **_CONVERGED},
 }  # fmt: skip
-#: The converged schedule's checks (every kind): 100 updates a window, five windows of
-#: patience, 500 to 20,000 updates a fit. Vector tasks train to convergence: on the headline
-#: track's four classic tasks, validation seeds 100-102, the five IfO methods of the family
-#: averaged 0.796 with it against 0.307 with the epoch counts, every method higher
-#: (docs/notes/fair-fight.md). Images keep their epochs until a study on them decides.
-_CONVERGED = {"schedule": "epochs", "check_updates": 100, "patience_checks": 5,
-              "min_fit_updates": 500, "max_fit_updates": 20_000}
-for _kind in DEFAULTS:
-    DEFAULTS[_kind].update(_CONVERGED)
-DEFAULTS["classic"]["schedule"] = "converged"
 DEFAULTS["image"] = DEFAULTS["maze"]  # other image envs: the mazes' schedule
 
 #: Changes by (env kind, preset). ``paper``: the paper's ResNet-18 reads each frame apart.
