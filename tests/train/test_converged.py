@@ -1,6 +1,7 @@
-"""The BCO family's converged schedule: a fit stops when its held-out score stops improving
-(never before its minimum of updates, never after its maximum) and keeps its best weights;
-the expert split is fixed by the seed; runs of every variant train with it end to end."""
+"""The converged schedule: a fit stops when its held-out score stops improving (never before
+its minimum of updates, never after its maximum; a loss by a relative gain) and keeps its best
+weights; the held-out splits are fixed by the seed; runs of the BCO family's variants and of
+LAPO train with it end to end, and a resumed LAPO run equals an uninterrupted one."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from train_testing import tiny_config
 
 from abco_train.harness.loop import train
 from abco_train.methods.bco.converged import Schedule, expert_split, fit_converged
+from abco_train.methods.converged import converge
 
 
 def _problem(n: int = 256) -> tuple[torch.nn.Module, torch.Tensor, torch.Tensor]:
@@ -80,3 +82,46 @@ def test_runs_train_to_convergence_end_to_end(env, method, tiny_data, tmp_path):
         if method != "bc" and "idm_updates" in stats:
             assert 10 <= stats["idm_updates"] <= 60 and "idm_epochs" not in stats
     assert any("idm_updates" in r["train"] for r in rows) == (method != "bc")
+
+
+def test_a_loss_counts_as_better_only_by_its_relative_gain():
+    net = torch.nn.Linear(1, 1)
+    scores = iter([-1.0, -0.995, -0.992, -0.991])  # minus a loss
+    schedule = Schedule(check_updates=1, patience_checks=3, min_updates=1, max_updates=100)
+    out = converge(lambda n: 0.0, lambda: next(scores), [net], schedule, min_gain=0.01)
+    assert out == {"loss": 0.0, "updates": 4.0, "best": -1.0}  # half a percent is not a gain
+    scores = iter([-1.0, -0.5, -0.499, -0.498, -0.497])
+    out = converge(lambda n: 0.0, lambda: next(scores), [net], schedule, min_gain=0.01)
+    assert out["updates"] == 5.0 and out["best"] == -0.5
+
+
+def _lapo_config(tiny_data, run_dir, **changes):
+    options = {"schedule": "converged", "check_updates": 3, "patience_checks": 2,
+               "min_fit_updates": 6, "max_fit_updates": 15, "rounds": 2}  # fmt: skip
+    cfg = tiny_config("AbcoMaze3x3-v0", "lapo", tiny_data, run_dir, method_options=options,
+                      device="cpu", **changes)  # fmt: skip
+    return cfg
+
+
+def test_lapo_trains_each_stage_to_convergence(tiny_data, tmp_path):
+    train(_lapo_config(tiny_data, tmp_path / "run"))
+    rows = [json.loads(line) for line in (tmp_path / "run" / "metrics.jsonl").open()]
+    assert len(rows) == 2
+    for row in rows:
+        stats = row["train"]
+        for count in ("model_steps", "decoder_updates", "policy_steps"):
+            assert 6 <= stats[count] <= 15, (count, stats[count])
+        assert stats["model_held_out"] < 0 and stats["policy_held_out"] < 0  # minus losses
+        assert 0.0 <= stats["decoder_held_out_accuracy"] <= 1.0
+
+
+def test_a_resumed_converged_lapo_run_equals_an_uninterrupted_one(tiny_data, tmp_path):
+    def numbers(run_dir):
+        rows = [json.loads(line) for line in (run_dir / "metrics.jsonl").open()]
+        return [(r["train"], r["eval"]) for r in rows]
+
+    train(_lapo_config(tiny_data, tmp_path / "straight"))
+    resumed = _lapo_config(tiny_data, tmp_path / "resumed")
+    assert train(resumed, stop_after=1) is None
+    train(resumed)
+    assert numbers(tmp_path / "straight") == numbers(tmp_path / "resumed")

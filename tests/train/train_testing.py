@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import fields
 from typing import Any
 
 import abco_data
@@ -46,8 +47,10 @@ def tiny_config(env_id, method, data, run_dir, **changes) -> RunConfig:
         plots=False,
     )
     values.update(changes)
-    if "schedule" in options_class(method).names():  # tiny epochs, not a converged schedule
-        values["method_options"] = {"schedule": "epochs", **(values.get("method_options") or {})}
+    options = options_class(method)
+    if "schedule" in options.names():  # tiny counts, not a converged schedule
+        fixed = next(f.metadata["choices"][0] for f in fields(options) if f.name == "schedule")
+        values["method_options"] = {"schedule": fixed, **(values.get("method_options") or {})}
     return config_from_record(values)  # BCO options may be given as keywords
 
 

@@ -24,6 +24,7 @@ import abco_envs
 from abco_train.config.fields import ConfigError, MethodOptions, Search, option
 from abco_train.config.limits import MAX_EPOCHS, MAX_PRE_TRANSITIONS, MAX_STEPS
 from abco_train.config.run import CELL_ARCHS, IDM_INPUTS, RunConfig, env_kind
+from abco_train.methods.converged import CONVERGED_DEFAULTS, converged_option
 
 __all__ = ["BCOOptions", "VARIANTS", "AUGMENTS", "SCHEDULES", "resolved", "DEFAULTS",
            "PRESET_DEFAULTS", "ENV_DEFAULTS", "REGIME_DEFAULTS"]  # fmt: skip
@@ -99,14 +100,10 @@ class BCOOptions(MethodOptions):
                                   "improving: --check-updates, --patience-checks, "
                                   "--min-fit-updates, --max-fit-updates)",
                                   choices=SCHEDULES)  # fmt: skip
-    check_updates: int | None = option("converged: minibatch updates between held-out checks",
-                                       min=1, max=MAX_STEPS)
-    patience_checks: int | None = option("converged: stop after this many checks without a "
-                                         "better held-out score", min=1, max=MAX_STEPS)
-    min_fit_updates: int | None = option("converged: at least this many updates per fit",
-                                         min=1, max=MAX_STEPS)
-    max_fit_updates: int | None = option("converged: at most this many updates per fit",
-                                         min=1, max=MAX_STEPS)
+    check_updates: int | None = converged_option("check_updates")
+    patience_checks: int | None = converged_option("patience_checks")
+    min_fit_updates: int | None = converged_option("min_fit_updates")
+    max_fit_updates: int | None = converged_option("max_fit_updates")
     augment: str | None = option("training-time augmentation: none, or transpose (mazes: "
                                  "transpose half of each minibatch about the main diagonal, "
                                  "actions N<->W, S<->E) (default: transpose for the general "
@@ -160,10 +157,6 @@ class BCOOptions(MethodOptions):
                               "takes --augment none")  # fmt: skip
 
 
-#: The converged schedule's checks (every kind): 100 updates a window, five windows of
-#: patience, 500 to 20,000 updates a fit.
-_CONVERGED = {"check_updates": 100, "patience_checks": 5, "min_fit_updates": 500,
-              "max_fit_updates": 20_000}
 #: Defaults by env kind: mazes train on 64x64 RGB frames, classic control on state vectors.
 #: Vector tasks train to convergence: on the headline track's four classic tasks, validation
 #: seeds 100-102, the five IfO methods of the family averaged 0.796 with it against 0.307 with
@@ -172,10 +165,10 @@ _CONVERGED = {"check_updates": 100, "patience_checks": 5, "min_fit_updates": 500
 DEFAULTS: dict[str, dict[str, Any]] = {
     "maze": {"idm_input": "difference", "idm_epochs": 4, "idm_patience": 1, "policy_epochs": 3,
              "first_epochs_factor": 3, "idm_samples": 20_000, "schedule": "epochs",
-             **_CONVERGED},
+             **CONVERGED_DEFAULTS},
     "classic": {"idm_input": "difference", "idm_epochs": 2, "idm_patience": 1,
                 "policy_epochs": 4, "first_epochs_factor": 2, "idm_samples": 50_000,
-                "schedule": "converged", **_CONVERGED},
+                "schedule": "converged", **CONVERGED_DEFAULTS},
 }  # fmt: skip
 DEFAULTS["image"] = DEFAULTS["maze"]  # other image envs: the mazes' schedule
 

@@ -32,7 +32,12 @@ losses are those of the authors' code, ``stage1_idm.py``, ``stage2_bc.py``, ``la
   method needs them.
 
 Schedule: iteration 0 runs stage 1 (``model_steps``) and the decoder; stage 2's
-``policy_steps`` are spread evenly over ``rounds`` iterations, each then evaluated.
+``policy_steps`` are spread evenly over ``rounds`` iterations, each then evaluated. With
+``schedule="converged"`` (:mod:`abco_train.methods.converged`) a tenth of the expert's and of
+the pre-demonstrations' transitions is held out, and each stage trains until its held-out
+score stops improving instead: stage 1 its loss ``L_1`` on the held-out transitions of both,
+the decoder its accuracy on the held-out pre-demonstrations, stage 2 (once per round) its
+latent regression error on the held-out expert transitions.
 
 Interactions: the pre-demonstration transitions it trains on (with a ``--budget``, the first
 ones it pays for), nothing online.
@@ -56,6 +61,7 @@ import torch.nn.functional as F
 
 from abco_train.config.run import RunConfig
 from abco_train.harness.training_data import TrainingData
+from abco_train.methods.converged import LOSS_GAIN, converge, held_out_split, schedule_of
 from abco_train.methods.lapo.networks import (
     ForwardModel,
     VectorQuantiser,
@@ -76,6 +82,8 @@ __all__ = ["LAPO", "LAPOOptions"]
 
 #: The most transitions the probe and the decoder read latents of at once.
 CHUNK = 1024
+#: The held-out splits' own streams (:func:`~abco_train.methods.converged.held_out_split`).
+EXPERT_TAG, PRE_TAG = 0x4C, 0x4D
 
 
 @register("lapo")
@@ -106,6 +114,13 @@ class LAPO(OfflineMethod):
         self.policy_opt = torch.optim.Adam(self.policy.parameters(), lr=opts.policy_lr)
         self.decoder_opt = torch.optim.Adam(self.decoder.parameters())
         self.stats: dict[str, float] = {}
+        # -- the rows each stage trains on, and those held out (converged schedule only) --
+        self.schedule = schedule_of(opts)
+        n_expert, n_pre = len(self.data_t.expert_t), len(self.data_t.pre_t)
+        split = (lambda n, tag: held_out_split(n, config.seed, tag)) if self.schedule else (
+            lambda n, tag: (np.arange(n), np.zeros(0, dtype=np.int64)))
+        self.expert_rows, self.expert_held = map(torch.from_numpy, split(n_expert, EXPERT_TAG))
+        self.pre_rows, self.pre_held = map(torch.from_numpy, split(n_pre, PRE_TAG))
 
     # -- the forward model's target -------------------------------------------------------------
 
@@ -137,12 +152,9 @@ class LAPO(OfflineMethod):
     def _model_step(self, batch: int) -> tuple[float, float]:
         """One Adam step of ``L_1`` on half expert, half pre-demonstration transitions."""
         half = max(1, batch // 2)
-        e = torch.from_numpy(self.rng.integers(0, len(self.data_t.expert_t), half))
-        p = torch.from_numpy(self.rng.integers(0, len(self.data_t.pre_t), batch - half))
-        (es, es1), (ps, ps1) = self.data_t.expert_pairs(e), self.data_t.pre_pairs(p)
-        s, s1 = torch.cat([es, ps]), torch.cat([es1, ps1])
-        q, commitment, _ = self.vq(self.idm(s, s1))
-        prediction = F.mse_loss(self.fdm(s, q), self._target(s, s1))
+        e = self.expert_rows[self.rng.integers(0, len(self.expert_rows), half)]
+        p = self.pre_rows[self.rng.integers(0, len(self.pre_rows), batch - half)]
+        prediction, commitment = self._model_losses(e, p)
         loss = prediction + commitment
         self.model_opt.zero_grad(set_to_none=True)
         loss.backward()
@@ -150,6 +162,53 @@ class LAPO(OfflineMethod):
         torch.nn.utils.clip_grad_norm_(params, self.options.grad_clip)
         self.model_opt.step()
         return float(prediction.detach()), float(commitment.detach())
+
+    def _model_losses(self, e: torch.Tensor, p: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``L_1``'s two terms on expert transitions ``e`` and pre-demonstrations ``p``."""
+        (es, es1), (ps, ps1) = self.data_t.expert_pairs(e), self.data_t.pre_pairs(p)
+        s, s1 = torch.cat([es, ps]), torch.cat([es1, ps1])
+        q, commitment, _ = self.vq(self.idm(s, s1))
+        return F.mse_loss(self.fdm(s, q), self._target(s, s1)), commitment
+
+    @torch.no_grad()
+    def _model_score(self) -> float:
+        """Minus ``L_1`` on the held-out transitions (the codebooks left as they are)."""
+        for net in (self.idm, self.fdm, self.vq):
+            net.eval()
+        e, p = self.expert_held, self.pre_held
+        total, n = 0.0, 0
+        for i in range(0, max(len(e), len(p)), CHUNK):
+            ei, pi = e[i : i + CHUNK], p[i : i + CHUNK]
+            prediction, commitment = self._model_losses(ei, pi)
+            size = len(ei) + len(pi)
+            total, n = total + float(prediction + commitment) * size, n + size
+        for net in (self.idm, self.fdm, self.vq):
+            net.train()
+        return -total / n if n else float("nan")
+
+    def _fit_model(self, batch: int) -> dict[str, float]:
+        """Stage 1: ``model_steps`` steps, or (converged) until its held-out score stops
+        improving; the mean losses of the last (up to) 100 steps."""
+        for net in (self.idm, self.fdm, self.vq):
+            net.train()
+        losses: list[tuple[float, float]] = []
+
+        def window(n: int) -> float:
+            losses.extend(self._model_step(batch) for _ in range(n))
+            del losses[:-100]
+            return losses[-1][0] if losses else float("nan")
+
+        steps = {"model_steps": float(self.options.model_steps)}
+        if self.schedule is None:
+            window(self.options.model_steps)
+        else:
+            out = converge(window, self._model_score, [self.idm, self.fdm, self.vq],
+                           self.schedule, LOSS_GAIN)  # fmt: skip
+            steps = {"model_steps": out["updates"], "model_held_out": out["best"]}
+        self.vq.eval()
+        tail = losses or [(float("nan"), float("nan"))]
+        return {"forward_loss": float(np.mean([x[0] for x in tail])),
+                "commitment_loss": float(np.mean([x[1] for x in tail])), **steps}  # fmt: skip
 
     @torch.no_grad()
     def latents(self, pairs: Any, n: int) -> torch.Tensor:
@@ -160,56 +219,102 @@ class LAPO(OfflineMethod):
 
     # -- stage 3: the decoder, and the probe ------------------------------------------------------
 
-    def _fit_decoder(self) -> float:
-        """``decoder_epochs`` of cross-entropy on the pre-demonstrations' latents."""
+    def _fit_decoder(self) -> dict[str, float]:
+        """``decoder_epochs`` of cross-entropy on the pre-demonstrations' latents, or
+        (converged) minibatches of them until the held-out accuracy stops improving."""
         z = self.latents(self.data_t.pre_pairs, len(self.data_t.pre_t))
         actions = self.data_t.pre_actions.to(self.device)
         self.decoder.train()
         loss = torch.zeros(())
-        for _ in range(self.options.decoder_epochs):
-            order = torch.from_numpy(self.rng.permutation(len(z)))
-            for i in range(0, len(z), 512):
-                idx = order[i : i + 512]
-                loss = F.cross_entropy(self.decoder(z[idx]), actions[idx],
-                                       label_smoothing=self.options.label_smoothing)
-                self.decoder_opt.zero_grad(set_to_none=True)
-                loss.backward()
-                self.decoder_opt.step()
-        return float(loss.detach())
 
-    def _policy_step(self, batch: int) -> float:
-        """One Adam step of ``|| pi(s) - sg(z) ||^2`` on expert transitions."""
-        idx = torch.from_numpy(self.rng.integers(0, len(self.data_t.expert_t), batch))
-        s, s1 = self.data_t.expert_pairs(idx)
+        def update(idx: torch.Tensor) -> None:
+            nonlocal loss
+            loss = F.cross_entropy(self.decoder(z[idx]), actions[idx],
+                                   label_smoothing=self.options.label_smoothing)
+            self.decoder_opt.zero_grad(set_to_none=True)
+            loss.backward()
+            self.decoder_opt.step()
+
+        if self.schedule is None:
+            for _ in range(self.options.decoder_epochs):
+                order = torch.from_numpy(self.rng.permutation(len(z)))
+                for i in range(0, len(z), 512):
+                    update(order[i : i + 512])
+            return {"decoder_loss": float(loss.detach())}
+        rows, held = self.pre_rows.to(z.device), self.pre_held.to(z.device)
+
+        def window(n: int) -> float:
+            self.decoder.train()
+            for _ in range(n):
+                update(rows[torch.from_numpy(self.rng.integers(0, len(rows), 512))])
+            return float(loss.detach())
+
+        @torch.no_grad()
+        def accuracy() -> float:
+            self.decoder.eval()
+            hits = (self.decoder(z[held]).argmax(1) == actions[held]).float()
+            return float(hits.mean()) if len(held) else float("nan")
+
+        out = converge(window, accuracy, [self.decoder], self.schedule)
+        return {"decoder_loss": out["loss"], "decoder_updates": out["updates"],
+                "decoder_held_out_accuracy": out["best"]}  # fmt: skip
+
+    def _policy_loss(self, rows: torch.Tensor) -> torch.Tensor:
+        """``|| pi(s) - sg(z) ||^2`` on expert transitions ``rows``."""
+        s, s1 = self.data_t.expert_pairs(rows)
         with torch.no_grad():
             self.idm.eval()
             z = self.idm(s, s1)
-        loss = F.mse_loss(self.policy(s), z)
+        return F.mse_loss(self.policy(s), z)
+
+    def _policy_step(self, batch: int) -> float:
+        """One Adam step of ``|| pi(s) - sg(z) ||^2`` on expert transitions."""
+        loss = self._policy_loss(self.expert_rows[self.rng.integers(0, len(self.expert_rows),
+                                                                    batch)])  # fmt: skip
         self.policy_opt.zero_grad(set_to_none=True)
         loss.backward()
         self.policy_opt.step()
         return float(loss.detach())
 
+    @torch.no_grad()
+    def _policy_score(self) -> float:
+        """Minus the latent regression error on the held-out expert transitions."""
+        self.policy.eval()
+        held = self.expert_held
+        total = sum(float(self._policy_loss(held[i : i + CHUNK])) * len(held[i : i + CHUNK])
+                    for i in range(0, len(held), CHUNK))  # fmt: skip
+        self.policy.train()
+        return -total / len(held) if len(held) else float("nan")
+
+    def _fit_policy(self, iteration: int, batch: int) -> dict[str, float]:
+        """Stage 2: this round's share of ``policy_steps``, or (converged) until the held-out
+        error stops improving."""
+        self.policy.train()
+        losses: list[float] = []
+
+        def window(n: int) -> float:
+            losses.extend(self._policy_step(batch) for _ in range(n))
+            del losses[:-100]
+            return losses[-1] if losses else float("nan")
+
+        if self.schedule is None:
+            steps = iteration_steps(self.options.policy_steps, iteration, self.num_iterations)
+            window(steps)
+            out = {"policy_steps": steps}
+        else:
+            fitted = converge(window, self._policy_score, [self.policy], self.schedule,
+                              LOSS_GAIN)  # fmt: skip
+            out = {"policy_steps": fitted["updates"], "policy_held_out": fitted["best"]}
+        return {"policy_loss": float(np.mean(losses)) if losses else float("nan"), **out}
+
     # -- the schedule -----------------------------------------------------------------------------
 
     def train_iteration(self, iteration: int) -> dict[str, float]:
         """Stages 1 and 3 in iteration 0; this iteration's share of stage 2."""
-        batch, opts = int(self.config.batch_size or 1), self.options
+        batch = int(self.config.batch_size or 1)
         if iteration == 0:
-            self.idm.train()
-            self.fdm.train()
-            self.vq.train()
-            losses = [self._model_step(batch) for _ in range(opts.model_steps)]
-            self.vq.eval()
-            tail = losses[-100:] or [(float("nan"), float("nan"))]
-            self.stats = {"forward_loss": float(np.mean([x[0] for x in tail])),
-                          "commitment_loss": float(np.mean([x[1] for x in tail])),
-                          "decoder_loss": self._fit_decoder(), **self.probe()}  # fmt: skip
-        self.policy.train()
-        steps = iteration_steps(opts.policy_steps, iteration, self.num_iterations)
-        policy = [self._policy_step(batch) for _ in range(steps)]
-        return {**self.stats, "policy_loss": float(np.mean(policy[-100:])) if policy else
-                float("nan"), "policy_steps": steps, **self._expert_accuracy()}  # fmt: skip
+            self.stats = {**self._fit_model(batch), **self._fit_decoder(), **self.probe()}
+        return {**self.stats, **self._fit_policy(iteration, batch), **self._expert_accuracy()}
 
     def probe(self) -> dict[str, float]:
         """The linear probe's held-out accuracy on the pre-demonstrations' latents (at most

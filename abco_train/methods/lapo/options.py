@@ -32,6 +32,7 @@ from abco_train.config.limits import (
     MAX_WIDTH,
 )
 from abco_train.config.run import RunConfig, env_kind
+from abco_train.methods.converged import CONVERGED_DEFAULTS, converged_option, schedule_option
 
 __all__ = ["LAPOOptions", "OPTION_DEFAULTS"]
 
@@ -71,6 +72,11 @@ class LAPOOptions(MethodOptions):
                                  max=MAX_EPOCHS)  # fmt: skip
     label_smoothing: float = option("label smoothing of the decoder's cross-entropy",
                                     min=0.0, max=1.0)  # fmt: skip
+    schedule: str = schedule_option("steps", "model-steps, decoder-epochs, policy-steps")
+    check_updates: int = converged_option("check_updates")
+    patience_checks: int = converged_option("patience_checks")
+    min_fit_updates: int = converged_option("min_fit_updates")
+    max_fit_updates: int = converged_option("max_fit_updates")
 
     @property
     def latent_dim(self) -> int:
@@ -92,12 +98,14 @@ class LAPOOptions(MethodOptions):
 #: commitment 0.05, EMA decay 0.999, stage 1 at 3e-4 with gradients clipped at 2, stage 2 at
 #: 2e-4, the decoder 3 epochs with label smoothing 0.05. Their stages take 50,000 and 60,000
 #: steps of 128 (about a GPU-hour each); here classic control takes 4,000 and 2,000 of the
-#: run's ``--batch-size``, frames 1,500 and 1,000 (the run's networks on a CPU).
+#: run's ``--batch-size``, frames 1,500 and 1,000 (the run's networks on a CPU). With
+#: ``schedule="converged"`` the counts give way to each stage's held-out score
+#: (:mod:`abco_train.methods.lapo.method`).
 _CLASSIC: dict[str, Any] = {
     "rounds": 3, "codebooks": 2, "slots": 4, "code_dim": 16, "codes": 64, "commitment": 0.05,
     "ema_decay": 0.999, "hidden": 64, "pool": 4, "model_steps": 4000, "model_lr": 3e-4,
     "grad_clip": 2.0, "policy_steps": 2000, "policy_lr": 2e-4, "decoder_epochs": 3,
-    "label_smoothing": 0.05,
+    "label_smoothing": 0.05, "schedule": "steps", **CONVERGED_DEFAULTS,
 }  # fmt: skip
 OPTION_DEFAULTS: dict[str, dict[str, Any]] = {
     "classic": _CLASSIC,
