@@ -1,7 +1,7 @@
 """The converged schedule: a fit stops when its held-out score stops improving (never before
 its minimum of updates, never after its maximum; a loss by a relative gain) and keeps its best
 weights; the held-out splits are fixed by the seed; runs of the BCO family's variants and of
-LAPO train with it end to end, and a resumed LAPO run equals an uninterrupted one."""
+LAPO and ILPO train with it end to end, and a resumed LAPO run equals an uninterrupted one."""
 
 from __future__ import annotations
 
@@ -125,3 +125,17 @@ def test_a_resumed_converged_lapo_run_equals_an_uninterrupted_one(tiny_data, tmp
     assert train(resumed, stop_after=1) is None
     train(resumed)
     assert numbers(tmp_path / "straight") == numbers(tmp_path / "resumed")
+
+
+@pytest.mark.parametrize("env", ["CartPole-v1", "AbcoMaze3x3-v0"])  # G and pi jointly; in turn
+def test_ilpo_trains_its_latent_model_to_convergence(env, tiny_data, tmp_path):
+    options = {"schedule": "converged", "check_updates": 3, "patience_checks": 2,
+               "min_fit_updates": 6, "max_fit_updates": 15, "remap_steps": 20}  # fmt: skip
+    cfg = tiny_config(env, "ilpo", tiny_data, tmp_path / "run", method_options=options,
+                      device="cpu")  # fmt: skip
+    train(cfg)
+    first = json.loads((tmp_path / "run" / "metrics.jsonl").open().readline())["train"]
+    counts = ["train_steps"] + (["policy_steps"] if env.startswith("Abco") else [])
+    for count in counts:
+        assert 6 <= first[count] <= 15, (count, first[count])
+    assert first["held_out_loss_min"] >= 0 and first["held_out_loss_exp"] >= 0

@@ -76,7 +76,10 @@ their own (:func:`abco_train.harness.rollouts.make_vector_env`, reset from the r
 generator; mazes: the train split's layouts from the start cell, cycling through them,
 episodes cut after ``remap_max_steps``, default ``4 n^2``); the step after an episode ends is
 the env's reset, not a transition, and is neither kept nor counted; with a ``--budget`` a
-round takes at most the interactions left (none once it is spent). ILPO learns nothing
+round takes at most the interactions left (none once it is spent). With ``schedule="converged"``
+(:mod:`abco_train.methods.ilpo.training`) every fit of ``G`` and ``pi`` runs until its loss on a
+held-out tenth of the expert's transitions stops improving instead of for its step counts;
+the remapping keeps its epochs (its data arrive online, round by round). ILPO learns nothing
 from the evaluation runs (no post-demonstrations) and uses no pre-demonstrations (it counts
 none).
 
@@ -115,6 +118,7 @@ from abco_data.torch_view import frames_tensor
 from abco_train.config.run import RunConfig
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method
+from abco_train.methods.converged import held_out_split, schedule_of
 from abco_train.methods.ilpo.networks import (
     ILPONet,
     ImageForwardModel,
@@ -123,10 +127,10 @@ from abco_train.methods.ilpo.networks import (
     latent_errors,
     latent_policy,
     min_over_latents_loss,
-    minibatches,
 )
 from abco_train.methods.ilpo.options import ENV_OPTION_DEFAULTS, OPTION_DEFAULTS, ILPOOptions
 from abco_train.methods.ilpo.remapping import ActionRemapping, remapping_steps
+from abco_train.methods.ilpo.training import HELD_OUT_TAG, LatentTraining
 from abco_train.methods.registry import register
 from abco_train.networks.cells import CellAverage
 
@@ -137,7 +141,7 @@ __all__ = ["ILPO", "ILPOOptions", "CellAverage", "ILPONet", "VectorForwardModel"
 
 
 @register("ilpo")
-class ILPO(Method):
+class ILPO(LatentTraining, Method):
     """ILPO (see the module docstring): latent forward model and policy, then remapping."""
 
     Options = ILPOOptions
@@ -191,13 +195,12 @@ class ILPO(Method):
         self.remapping = ActionRemapping(self.net, self.n_actions, opts, shape,
                                          self.expert_obs.dtype, self.device, lr)  # fmt: skip
         self.labels: np.ndarray | None = None
-
-    @property
-    def _batch_size(self) -> int:
-        """The run's minibatch size (``None`` only in a config not yet resolved)."""
-        batch_size = self.config.batch_size
-        assert batch_size is not None, "the run's config is resolved before its method is built"
-        return batch_size
+        # -- the expert transitions G and pi train on, and those held out (converged) ------
+        self.schedule = schedule_of(opts)
+        n = len(self.expert_t)
+        train_rows, held_rows = (held_out_split(n, config.seed, HELD_OUT_TAG) if self.schedule
+                                 else (np.arange(n), np.zeros(0, dtype=np.int64)))  # fmt: skip
+        self.train_rows, self.held_rows = torch.from_numpy(train_rows), torch.from_numpy(held_rows)
 
     # -- targets ------------------------------------------------------------------------------
 
@@ -221,64 +224,6 @@ class ILPO(Method):
         if self.images:
             return self._pooled_delta(s, s1) / self.delta_scale
         return ((s1.double() - s.double()).float() - self.delta_mean) / self.delta_std
-
-    # -- training of E, G and pi on the expert pairs --------------------------------------------
-
-    def _train_latent_model(self, steps: int, policy_steps: int | None = None
-                            ) -> dict[str, float]:  # fmt: skip
-        """``steps`` Adam steps of ``L_min + L_exp`` on minibatches of the expert pairs, or
-        (``policy_steps`` not ``None``) ``steps`` of ``L_min`` then ``policy_steps`` of
-        ``L_exp`` against the fixed ``G``; the mean losses of the last (up to) 100 steps."""
-        if policy_steps is not None:
-            return self._train_in_turn(steps, policy_steps)
-        w, relax = float(self.options.exp_weight), float(self.options.relax)
-        self.net.train()
-        recent: list[tuple[float, float]] = []
-        for idx in minibatches(self.rng, len(self.expert_t), steps, self._batch_size):
-            obs = self.expert_obs[self.expert_t[idx]].to(self.device)
-            target = self.expert_targets[idx].to(self.device)
-            _, pred, logits = self.net(obs)
-            loss_min, _ = min_over_latents_loss(pred, target, relax)
-            loss_exp = expected_prediction_loss(logits.softmax(1), pred, target, w)
-            self.opt.zero_grad(set_to_none=True)
-            (loss_min + loss_exp).backward()
-            self.opt.step()
-            recent = [*recent[-99:], (loss_min.item(), loss_exp.item())]
-        mean = np.mean(recent, axis=0) if recent else (float("nan"), float("nan"))
-        return {"loss_min": float(mean[0]), "loss_exp": float(mean[1]), "train_steps": steps}
-
-    def _train_in_turn(self, steps: int, policy_steps: int) -> dict[str, float]:
-        """``G`` alone for ``steps`` steps of ``L_min``, then ``pi`` alone for
-        ``policy_steps`` steps of ``L_exp`` against the trained ``G`` (option
-        ``policy_steps``). One Adam optimiser: parameters without a gradient are skipped."""
-        relax = float(self.options.relax)
-        model, policy = self.net.forward_model, self.net.policy
-        n, batch_size = len(self.expert_t), self._batch_size
-        self.net.train()
-        recent_min: list[float] = []
-        for idx in minibatches(self.rng, n, steps, batch_size):
-            obs = self.expert_obs[self.expert_t[idx]].to(self.device)
-            _, pred = model(obs)
-            loss_min, _ = min_over_latents_loss(pred, self.expert_targets[idx].to(self.device),
-                                                relax)  # fmt: skip
-            self.opt.zero_grad(set_to_none=True)
-            loss_min.backward()
-            self.opt.step()
-            recent_min = [*recent_min[-99:], loss_min.item()]
-        recent_exp: list[float] = []
-        for idx in minibatches(self.rng, n, policy_steps, batch_size):
-            obs = self.expert_obs[self.expert_t[idx]].to(self.device)
-            with torch.no_grad():
-                _, pred = model(obs)
-            target = self.expert_targets[idx].to(self.device)
-            loss_exp = expected_prediction_loss(policy(obs).softmax(1), pred, target)
-            self.opt.zero_grad(set_to_none=True)
-            loss_exp.backward()
-            self.opt.step()
-            recent_exp = [*recent_exp[-99:], loss_exp.item()]
-        return {"loss_min": float(np.mean(recent_min)) if recent_min else float("nan"),
-                "loss_exp": float(np.mean(recent_exp)) if recent_exp else float("nan"),
-                "train_steps": steps, "policy_steps": policy_steps}  # fmt: skip
 
     @torch.no_grad()
     def _latents_of(self, s: torch.Tensor, s1: torch.Tensor, batch: int = 512

@@ -31,6 +31,7 @@ from abco_train.config.envs import env_spaces
 from abco_train.config.fields import ConfigError, MethodOptions, Search, flag_of, option
 from abco_train.config.limits import MAX_ENVS, MAX_EPOCHS, MAX_LATENTS, MAX_STEPS, MAX_WIDTH
 from abco_train.config.run import CELL_ARCHS, RunConfig, env_kind
+from abco_train.methods.converged import CONVERGED_DEFAULTS, converged_option, schedule_option
 
 __all__ = ["ILPOOptions", "OPTION_DEFAULTS", "ENV_OPTION_DEFAULTS", "TARGETS", "LATENT_INITS",
            "REMAP_MODES", "REMAP_INPUTS"]  # fmt: skip
@@ -101,6 +102,12 @@ class ILPOOptions(MethodOptions):
                                "iteration", min=0, max=MAX_EPOCHS)  # fmt: skip
     remap_max_steps: int | None = option("mazes: cut remapping episodes after this many steps "
                                          "(default: 4 n^2)", min=1, max=MAX_STEPS)  # fmt: skip
+    schedule: str = schedule_option("steps", "train-steps, policy-steps, later-steps; the "
+                                    "remapping keeps its epochs")  # fmt: skip
+    check_updates: int = converged_option("check_updates")
+    patience_checks: int = converged_option("patience_checks")
+    min_fit_updates: int = converged_option("min_fit_updates")
+    max_fit_updates: int = converged_option("max_fit_updates")
 
     @classmethod
     def for_run(cls, config: RunConfig, method: str = "ilpo") -> ILPOOptions:
@@ -154,6 +161,7 @@ _CLASSIC_DEFAULTS: dict[str, Any] = {
     "relax": 0.0, "latent_init": "random", "split_noise": 0.01, "remap": "state",
     "remap_input": "effect+embedding", "remap_steps": 500, "remap_envs": 10,
     "remap_epsilon": 0.2, "remap_margin": 0.1, "remap_epochs": 20, "remap_max_steps": None,
+    "schedule": "steps", **CONVERGED_DEFAULTS,
 }  # fmt: skip
 OPTION_DEFAULTS: dict[str, dict[str, Any]] = {
     "classic": _CLASSIC_DEFAULTS,
