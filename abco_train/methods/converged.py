@@ -30,7 +30,7 @@ from abco_train.config.limits import MAX_STEPS
 if TYPE_CHECKING:  # the options' modules import this one, and no torch (fast --help)
     import torch
 
-__all__ = ["Schedule", "converge", "held_out_split", "schedule_of", "schedule_option",
+__all__ = ["Schedule", "converge", "held_out_split", "split_rows", "schedule_of", "schedule_option",
            "converged_option", "CONVERGED_DEFAULTS", "HELD_OUT_CAP", "LOSS_GAIN"]  # fmt: skip
 
 #: The most rows a held-out split keeps (a tenth of the data below it).
@@ -97,6 +97,18 @@ def held_out_split(n: int, seed: int, tag: int) -> tuple[np.ndarray, np.ndarray]
     size = min(HELD_OUT_CAP, max(1, n // 10)) if n > 1 else 0
     order = derived_rng(seed, tag).permutation(n)
     return np.sort(order[size:]), np.sort(order[:size])
+
+
+def split_rows(n: int, seed: int, tag: int, held_out: bool) -> tuple[Any, Any]:
+    """``(train, held-out)`` rows of ``n`` as torch tensors: :func:`held_out_split`'s where
+    ``held_out`` (a converged schedule), else every row and none."""
+    import torch
+
+    if held_out:
+        train, held = held_out_split(n, seed, tag)
+    else:
+        train, held = np.arange(n), np.zeros(0, dtype=np.int64)
+    return torch.from_numpy(train), torch.from_numpy(held)
 
 
 def converge(window: Callable[[int], float], score: Callable[[], float],

@@ -1,7 +1,7 @@
 """The converged schedule: a fit stops when its held-out score stops improving (never before
 its minimum of updates, never after its maximum; a loss by a relative gain) and keeps its best
 weights; the held-out splits are fixed by the seed; runs of the BCO family's variants and of
-LAPO and ILPO train with it end to end, and a resumed LAPO run equals an uninterrupted one."""
+LAPO, ILPO and DILO train with it end to end, and a resumed LAPO run equals an uninterrupted one."""
 
 from __future__ import annotations
 
@@ -139,3 +139,14 @@ def test_ilpo_trains_its_latent_model_to_convergence(env, tiny_data, tmp_path):
     for count in counts:
         assert 6 <= first[count] <= 15, (count, first[count])
     assert first["held_out_loss_min"] >= 0 and first["held_out_loss_exp"] >= 0
+
+
+def test_dilo_trains_its_utility_then_its_policy_to_convergence(tiny_data, tmp_path):
+    options = {"schedule": "converged", "check_updates": 3, "patience_checks": 2,
+               "min_fit_updates": 6, "max_fit_updates": 15, "rounds": 1}  # fmt: skip
+    cfg = tiny_config("CartPole-v1", "dilo", tiny_data, tmp_path / "run", method_options=options,
+                      device="cpu")  # fmt: skip
+    train(cfg)
+    stats = json.loads((tmp_path / "run" / "metrics.jsonl").open().readline())["train"]
+    assert 6 <= stats["value_steps"] <= 15 and 6 <= stats["policy_steps"] <= 15
+    assert np.isfinite(stats["value_held_out"]) and stats["policy_held_out"] <= 0

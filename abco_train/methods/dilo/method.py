@@ -58,6 +58,7 @@ import torch.nn.functional as F
 
 from abco_train.config.run import ConfigError, RunConfig
 from abco_train.harness.training_data import TrainingData
+from abco_train.methods.converged import LOSS_GAIN, converge, schedule_of, split_rows
 from abco_train.methods.dilo.options import DILOOptions
 from abco_train.methods.offline import (
     OfflineMethod,
@@ -73,6 +74,8 @@ __all__ = ["DILO", "DILOOptions", "f_star", "dual_loss", "orthogonal_gradient"]
 
 #: The most transitions the diagnostics read at once.
 CHUNK = 1024
+#: The held-out splits' own streams (:func:`~abco_train.methods.converged.held_out_split`).
+PRE_TAG, EXPERT_TAG, POLICY_TAG = 0xD1, 0xD2, 0xD3
 
 
 def f_star(x: torch.Tensor) -> torch.Tensor:
@@ -145,6 +148,14 @@ class DILO(OfflineMethod):
         assert opts.value_lr and opts.policy_lr, "the run's lr fills them once it is resolved"
         self.value_opt = torch.optim.Adam(self.value.parameters(), lr=opts.value_lr)
         self.policy_opt = torch.optim.Adam(self.policy.parameters(), lr=opts.policy_lr)
+        # -- what trains and what is held out: positions in pre_rows, expert_rows, pre_t ----
+        self.schedule = schedule_of(opts)
+        held, seed = self.schedule is not None, config.seed
+        self.pre_train, self.pre_held = split_rows(len(self.pre_rows), seed, PRE_TAG, held)
+        self.expert_train, self.expert_held = split_rows(len(self.expert_rows), seed,
+                                                         EXPERT_TAG, held)  # fmt: skip
+        self.policy_train, self.policy_held = split_rows(len(self.data_t.pre_t), seed,
+                                                         POLICY_TAG, held)  # fmt: skip
 
     # -- one update -------------------------------------------------------------------------------
 
@@ -213,20 +224,82 @@ class DILO(OfflineMethod):
     # -- the schedule -----------------------------------------------------------------------------
 
     def train_iteration(self, iteration: int) -> dict[str, float]:
-        """This iteration's share of ``steps`` updates of ``V`` and ``pi``; diagnostics."""
+        """This iteration's share of ``steps`` updates of ``V`` and ``pi``, or (converged)
+        both until ``V``'s held-out dual loss stops improving, then ``pi`` alone until its
+        held-out weighted loss does; diagnostics."""
         batch = int(self.config.batch_size or 1)
-        steps = iteration_steps(self.options.steps, iteration, self.num_iterations)
         self.value.train()
         self.policy.train()
-        losses = []
-        n_pre, n_exp, n_all = len(self.pre_rows), len(self.expert_rows), len(self.data_t.pre_t)
-        for _ in range(steps):
-            pre_idx = torch.from_numpy(self.rng.integers(0, n_pre, batch))
-            expert_idx = torch.from_numpy(self.rng.integers(0, n_exp, batch))
-            losses.append(self._value_step(pre_idx, expert_idx))
-            self._policy_step(torch.from_numpy(self.rng.integers(0, n_all, batch)))
+        losses: list[float] = []
+
+        def draw(rows: torch.Tensor) -> torch.Tensor:
+            return rows[self.rng.integers(0, len(rows), batch)]
+
+        def joint(n: int) -> float:
+            for _ in range(n):
+                losses.append(self._value_step(draw(self.pre_train), draw(self.expert_train)))
+                self._policy_step(draw(self.policy_train))
+            return losses[-1] if losses else float("nan")
+
+        if self.schedule is None:
+            steps = iteration_steps(self.options.steps, iteration, self.num_iterations)
+            joint(steps)
+            counts: dict[str, float] = {"value_steps": steps}
+        else:
+            value = converge(joint, self._value_score, [self.value, self.target, self.policy],
+                             self.schedule, LOSS_GAIN)  # fmt: skip
+
+            def policy_only(n: int) -> float:
+                for _ in range(n):
+                    self._policy_step(draw(self.policy_train))
+                return float("nan")
+
+            policy = converge(policy_only, self._policy_score, [self.policy], self.schedule,
+                              LOSS_GAIN)  # fmt: skip
+            counts = {"value_steps": value["updates"], "value_held_out": value["best"],
+                      "policy_steps": policy["updates"], "policy_held_out": policy["best"]}
         return {"dual_loss": float(np.mean(losses[-100:])) if losses else float("nan"),
-                "value_steps": steps, **self.diagnostics()}  # fmt: skip
+                **counts, **self.diagnostics()}  # fmt: skip
+
+    @torch.no_grad()
+    def _value_score(self) -> float:
+        """Minus the dual ``L(V)`` on the held-out triples (forward residuals, the smaller
+        target head), ``V`` read in evaluation mode."""
+        self.value.eval()
+        pre, expert = self.pre_rows[self.pre_held], self.expert_rows[self.expert_held]
+        residuals, values = [], []
+        for which, (rows, obs) in enumerate(((pre, self.data_t.pre_obs),
+                                             (expert, self.data_t.expert_obs))):
+            parts = []
+            for i in range(0, len(rows), CHUNK):
+                r = rows[i : i + CHUNK]
+                online = self.value(obs[r], obs[r + 1])
+                target = self.target(obs[r + 1], obs[r + 2]).min(1, keepdim=True).values
+                parts.append(self.options.gamma * target - online)
+                if which == 0:  # the mean utility is taken on the offline data
+                    values.append(online)
+            residuals.append(torch.cat(parts) if parts else torch.zeros(0, 2))
+        self.value.train()
+        if not len(pre) or not len(expert):
+            return float("nan")
+        opts = self.options
+        loss = (opts.lam * dual_loss(residuals[1], residuals[0], opts.beta)
+                + (1 - opts.lam) * torch.cat(values).mean())  # fmt: skip
+        return -float(loss)
+
+    @torch.no_grad()
+    def _policy_score(self) -> float:
+        """Minus the weighted log-likelihood loss on the held-out offline transitions."""
+        self.policy.eval()
+        held, total = self.policy_held, 0.0
+        for i in range(0, len(held), CHUNK):
+            idx = held[i : i + CHUNK]
+            s, s1 = self.data_t.pre_pairs(idx)
+            actions = self.data_t.pre_actions[idx].to(self.device)
+            nll = F.cross_entropy(self.policy(s), actions, reduction="none")
+            total += float((self.weights(s, s1) * nll).sum())
+        self.policy.train()
+        return -total / len(held) if len(held) else float("nan")
 
     @torch.no_grad()
     def diagnostics(self, most: int = 4096) -> dict[str, float]:

@@ -26,6 +26,7 @@ from typing import Any, ClassVar
 from abco_train.config.fields import MethodOptions, Search, option
 from abco_train.config.limits import MAX_ITERATIONS, MAX_STEPS
 from abco_train.config.run import RunConfig, env_kind
+from abco_train.methods.converged import CONVERGED_DEFAULTS, converged_option, schedule_option
 
 __all__ = ["DILOOptions", "OPTION_DEFAULTS"]
 
@@ -58,6 +59,13 @@ class DILOOptions(MethodOptions):
                                     min=0.0, exclusive=True)  # fmt: skip
     policy_lr: float | None = option("Adam's learning rate of the policy (default: the run's "
                                      "--lr)", min=0.0, exclusive=True)  # fmt: skip
+    schedule: str = schedule_option("steps", "dilo-steps over the rounds; converged: V and "
+                                    "the policy until V's held-out dual stops improving, then "
+                                    "the policy alone until its held-out loss does")  # fmt: skip
+    check_updates: int = converged_option("check_updates")
+    patience_checks: int = converged_option("patience_checks")
+    min_fit_updates: int = converged_option("min_fit_updates")
+    max_fit_updates: int = converged_option("max_fit_updates")
 
     @classmethod
     def for_run(cls, config: RunConfig, method: str = "dilo") -> DILOOptions:
@@ -83,6 +91,7 @@ class DILOOptions(MethodOptions):
 _CLASSIC: dict[str, Any] = {
     "rounds": 3, "steps": 5000, "gamma": 0.99, "beta": 0.5, "lam": 0.8, "eta": 0.5,
     "temperature": 0.06, "weight_clip": 100.0, "polyak": 0.005, "value_lr": None, "policy_lr": None,
+    "schedule": "steps", **CONVERGED_DEFAULTS,
 }  # fmt: skip
 OPTION_DEFAULTS: dict[str, dict[str, Any]] = {
     "classic": _CLASSIC, "maze": {**_CLASSIC, "steps": 2000}, "image": {**_CLASSIC, "steps": 2000},

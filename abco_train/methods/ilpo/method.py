@@ -118,7 +118,7 @@ from abco_data.torch_view import frames_tensor
 from abco_train.config.run import RunConfig
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method
-from abco_train.methods.converged import held_out_split, schedule_of
+from abco_train.methods.converged import schedule_of, split_rows
 from abco_train.methods.ilpo.networks import (
     ILPONet,
     ImageForwardModel,
@@ -197,10 +197,8 @@ class ILPO(LatentTraining, Method):
         self.labels: np.ndarray | None = None
         # -- the expert transitions G and pi train on, and those held out (converged) ------
         self.schedule = schedule_of(opts)
-        n = len(self.expert_t)
-        train_rows, held_rows = (held_out_split(n, config.seed, HELD_OUT_TAG) if self.schedule
-                                 else (np.arange(n), np.zeros(0, dtype=np.int64)))  # fmt: skip
-        self.train_rows, self.held_rows = torch.from_numpy(train_rows), torch.from_numpy(held_rows)
+        self.train_rows, self.held_rows = split_rows(len(self.expert_t), config.seed,
+                                                     HELD_OUT_TAG, self.schedule is not None)
 
     # -- targets ------------------------------------------------------------------------------
 

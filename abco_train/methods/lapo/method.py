@@ -61,7 +61,7 @@ import torch.nn.functional as F
 
 from abco_train.config.run import RunConfig
 from abco_train.harness.training_data import TrainingData
-from abco_train.methods.converged import LOSS_GAIN, converge, held_out_split, schedule_of
+from abco_train.methods.converged import LOSS_GAIN, converge, schedule_of, split_rows
 from abco_train.methods.lapo.networks import (
     ForwardModel,
     VectorQuantiser,
@@ -116,11 +116,11 @@ class LAPO(OfflineMethod):
         self.stats: dict[str, float] = {}
         # -- the rows each stage trains on, and those held out (converged schedule only) --
         self.schedule = schedule_of(opts)
-        n_expert, n_pre = len(self.data_t.expert_t), len(self.data_t.pre_t)
-        split = (lambda n, tag: held_out_split(n, config.seed, tag)) if self.schedule else (
-            lambda n, tag: (np.arange(n), np.zeros(0, dtype=np.int64)))
-        self.expert_rows, self.expert_held = map(torch.from_numpy, split(n_expert, EXPERT_TAG))
-        self.pre_rows, self.pre_held = map(torch.from_numpy, split(n_pre, PRE_TAG))
+        held = self.schedule is not None
+        self.expert_rows, self.expert_held = split_rows(len(self.data_t.expert_t), config.seed,
+                                                        EXPERT_TAG, held)  # fmt: skip
+        self.pre_rows, self.pre_held = split_rows(len(self.data_t.pre_t), config.seed, PRE_TAG,
+                                                  held)  # fmt: skip
 
     # -- the forward model's target -------------------------------------------------------------
 
