@@ -66,7 +66,7 @@ def test_resolved_options_are_stored_whole() -> None:
     cfg = resolve_config(RunConfig(env="AbcoMaze10x10-v0", method_options={"idm_epochs": 7}))
     assert cfg.method_options == asdict(BCOOptions(
         idm_input="difference", idm_epochs=7, idm_patience=1, idm_samples=20_000,
-        policy_epochs=10, first_epochs_factor=3, schedule="epochs", check_updates=100,
+        policy_epochs=10, first_epochs_factor=3, schedule="converged", check_updates=100,
         patience_checks=5, min_fit_updates=500, max_fit_updates=20_000))  # fmt: skip
 
 
