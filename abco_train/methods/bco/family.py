@@ -65,12 +65,13 @@ from abco_train.config.run import RunConfig
 from abco_train.harness.rollouts import Rollouts
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method
-from abco_train.methods.bco.converged import Schedule, expert_split, fit_converged
+from abco_train.methods.bco.converged import expert_split, fit_converged
 from abco_train.methods.bco.fitting import fit, predict, validation_split
 from abco_train.methods.bco.health import DEAD_MARGIN, MIN_JUDGED, label_health
 from abco_train.methods.bco.idm import IDMTraining
 from abco_train.methods.bco.options import VARIANTS, BCOOptions, resolved
 from abco_train.methods.bco.sampling import sample_training_set
+from abco_train.methods.converged import schedule_of
 from abco_train.methods.registry import register
 from abco_train.networks.builders import build_networks, data_statistics
 
@@ -135,12 +136,9 @@ class BCOFamily(IDMTraining, Method):
         self.expert_obs = frames_tensor(data.expert_obs, self.device)
         self.expert_t = torch.from_numpy(data.expert_t)
         # -- the schedule: epochs, or each fit until its held-out score stops improving ------
-        self.schedule = None
+        self.schedule = schedule_of(self.options)
         rows, held = np.arange(len(data.expert_t)), np.zeros(0, dtype=np.int64)
-        if self.options.schedule == "converged":
-            o = self.options
-            self.schedule = Schedule(resolved(o.check_updates), resolved(o.patience_checks),
-                                     resolved(o.min_fit_updates), resolved(o.max_fit_updates))
+        if self.schedule is not None:
             rows, held = expert_split(len(data.expert_t), config.seed)  # the policy's check
         self.policy_rows, self.policy_held = torch.from_numpy(rows), torch.from_numpy(held)
         # -- I_pos (accumulated post-demonstrations) and the current I_s ----------------------
