@@ -16,6 +16,7 @@ from abco_train.methods.bco.sampling import (
     run_action_distribution,
     sample_training_set,
 )
+from abco_train.networks import layers
 from abco_train.networks.builders import build_networks
 from abco_train.networks.encoders import FeatureSelfAttention
 from abco_train.networks.layers import SelfAttention2d
@@ -45,6 +46,23 @@ def test_attention_mixes_positions():
     x2 = x.clone()
     x2[0, :, 2, 2] += 5.0
     assert not torch.allclose(sa(x)[0, :, 0, 0], sa(x2)[0, :, 0, 0])
+
+
+@pytest.mark.parametrize("side", [(3, 4), (1, 12), (4, 4), (5, 5)])
+def test_attention_is_the_papers_softmax_on_either_path(side, monkeypatch):
+    """Short maps take their softmax over a leading dim (a CPU speed path); both paths give
+    ``beta_{j,i} = softmax_i(f(x_i) . g(x_j))``, checked against the formula written out."""
+    torch.manual_seed(0)
+    sa = SelfAttention2d(8, 2)
+    x = torch.randn(3, 8, *side)
+    tokens = x.flatten(2).transpose(1, 2)
+    key, query, value = sa.key(tokens), sa.query(tokens), sa.value(tokens)
+    beta = torch.exp(query @ key.transpose(1, 2))
+    beta = beta / beta.sum(-1, keepdim=True)
+    expected = sa.out(beta @ value).transpose(1, 2).reshape(x.shape)
+    for threshold in (0, 10_000):  # every map on the long path, then on the short one
+        monkeypatch.setattr(layers, "SHORT_SOFTMAX", threshold)
+        torch.testing.assert_close(sa.attend(x), expected, rtol=1e-5, atol=1e-6)
 
 
 def test_feature_attention_is_not_a_single_token():
