@@ -17,6 +17,13 @@ fewest on any; :func:`abco_train.report.aggregates.score_matrices`). With ``rlia
   (:data:`EQUIVALENCE`: neither is ahead by more than a tenth of the chance), else
   ``undecided`` (more seeds would tell).
 
+Scores below a random policy's (below 0) enter every aggregate and every pair at 0
+(:data:`SCORE_FLOOR`): no imitation is no imitation, however far below random the returns
+fall. Of the built-in tasks only LunarLander's returns have no lower bound (its shaping and
+crash penalties), so without the floor one task's failure mode would set the means, their
+intervals and the optimality gaps of the methods that fail there. The task tables keep the
+scores as they are, and the aggregates say how many runs the floor lifted.
+
 Example:
     >>> verdict(0.62, 0.81), verdict(0.2, 0.45), verdict(0.45, 0.58), verdict(0.35, 0.66)
     ('better', 'worse', 'equivalent', 'undecided')
@@ -40,8 +47,8 @@ from abco_train.report import aggregates
 from abco_train.report.headline import IFO_METHODS
 from abco_train.report.headline_plots import AGGREGATES_PNG, Interval, plot_aggregates
 
-__all__ = ["EVEN", "EQUIVALENCE", "VERDICTS", "PROFILE_PNG", "Interval", "verdict", "standings",
-           "Ranking", "compute", "section"]  # fmt: skip
+__all__ = ["EVEN", "EQUIVALENCE", "VERDICTS", "PROFILE_PNG", "SCORE_FLOOR", "Interval",
+           "verdict", "standings", "Ranking", "compute", "section"]  # fmt: skip
 
 #: P(X > Y) of two methods the benchmark cannot tell apart.
 EVEN = 0.5
@@ -50,6 +57,8 @@ EQUIVALENCE = (0.40, 0.60)
 #: The verdicts of a pair, from X's side.
 VERDICTS = ("better", "worse", "equivalent", "undecided")
 PROFILE_PNG = "headline_profile.png"
+#: Scores below it count as it in the aggregates and pairs (the module docstring says why).
+SCORE_FLOOR = 0.0
 
 Scores = Mapping[str, Mapping[str, Mapping[int, float]]]  # method -> task -> seed -> score
 
@@ -97,16 +106,21 @@ class Ranking:
     profile_cis: dict[str, np.ndarray] = field(default_factory=dict)
     taus: np.ndarray = field(default_factory=lambda: np.zeros(0))
     pairs: dict[tuple[str, str], Interval] = field(default_factory=dict)
+    floored: dict[str, dict[str, int]] = field(default_factory=dict)  # method -> task -> runs
 
 
 def compute(scores: Scores, tasks: Sequence[str], rl: SimpleNamespace, reps: int | None = None
             ) -> Ranking:  # fmt: skip
     """IQM, optimality gap, mean, performance profiles and the pairs' P(X > Y) of the IfO
-    methods in ``scores`` (others are ignored), each bootstrap seeded (numpy seed 0)."""
+    methods in ``scores`` (others are ignored), scores below :data:`SCORE_FLOOR` lifted to it,
+    each bootstrap seeded (numpy seed 0)."""
     reps = int(reps or aggregates.REPS)
     ifo = {m: scores[m] for m in IFO_METHODS if m in scores}
     matrices, dropped, left_out = aggregates.score_matrices(ifo, tasks)
-    out = Ranking(matrices, dropped, left_out)
+    floored = {m: {t: int(n) for t, n in zip(tasks, (x < SCORE_FLOOR).sum(0)) if n}
+               for m, x in matrices.items()}  # fmt: skip
+    matrices = {m: np.maximum(x, SCORE_FLOOR) for m, x in matrices.items()}
+    out = Ranking(matrices, dropped, left_out, floored={m: f for m, f in floored.items() if f})
     if not matrices:
         return out
     metrics = rl.metrics
@@ -160,7 +174,10 @@ def section(scores: Scores, tasks: Sequence[str], out: Path, labels: Mapping[str
              " other method do not. A method with unequal runs across tasks keeps its n"
              " lowest-numbered seeds on every task (n: its fewest on any). Intervals: 95%"
              f" stratified bootstrap ({int(reps or aggregates.REPS):,} replicates, runs resampled"
-             " within each task, numpy seed 0) by `rliable`.", ""]  # fmt: skip
+             " within each task, numpy seed 0) by `rliable`. A score below a random policy's"
+             f" enters at {SCORE_FLOOR:g}: doing worse than random is no more imitation than"
+             " random (only LunarLander's returns are unbounded below); the task tables keep"
+             " it as it is.", ""]  # fmt: skip
     if older:
         lines.append(f"- left out: {older} finished run(s) without a score (older records)")
     missing = [m for m in IFO_METHODS if m not in scores]
@@ -177,6 +194,10 @@ def section(scores: Scores, tasks: Sequence[str], out: Path, labels: Mapping[str
     if not ranking.matrices:
         return [*head, *lines, "", "No IfO method has scored runs on every task.", "",
                 *pair_head, "Nothing to compare."], {}  # fmt: skip
+    for m, tasks_lifted in ranking.floored.items():
+        where = ", ".join(f"{t} {k}" for t, k in tasks_lifted.items())
+        lines.append(f"- entered at {SCORE_FLOOR:g}: {labels.get(m, m)}, runs below it on"
+                     f" {where}")  # fmt: skip
     lines += _aggregate_table(ranking, labels, n, csv_rows)
     png = aggregates.plot_profiles(
         ranking.profiles, ranking.profile_cis, ranking.taus, rl, labels, out / PROFILE_PNG,

@@ -22,7 +22,7 @@ import pytest
 
 from abco_train.bench.records import RecordError, check_final
 from abco_train.harness import runtime
-from abco_train.report import aggregates, provenance
+from abco_train.report import aggregates, provenance, ranking
 from abco_train.report.headline import IFO_METHODS, headline_value
 from abco_train.report.ranking import standings, verdict
 from abco_train.report.write import write_report
@@ -207,6 +207,20 @@ def test_standings_name_who_is_ahead() -> None:
     assert table["abco"] == ([("bco", 0.75)], [], [("iupe", 0.5)], [])
     assert table["bco"] == ([], [("abco", 0.25)], [], [("iupe", 0.5)])
     assert table["iupe"] == ([], [], [("abco", 0.5)], [("bco", 0.5)])
+
+
+def test_scores_below_random_enter_the_aggregates_at_the_floor() -> None:
+    """A run far below random (LunarLander's unbounded returns) counts as a random one: the
+    mean and the pair are those of the floored scores, and the lift is counted per task."""
+    rl = aggregates.load_rliable()[0]
+    if rl is None:
+        pytest.skip("rliable is not installed")
+    scores = {"bco": {"a": {0: -3.0, 1: 0.5}, "b": {0: 1.0, 1: 1.0}},
+              "abco": {"a": {0: -0.1, 1: 0.5}, "b": {0: 1.0, 1: 1.0}}}
+    ranked = ranking.compute(scores, ["a", "b"], rl, reps=50)
+    assert ranked.mean["bco"][0] == pytest.approx(0.625)  # (0 + 0.5 + 1 + 1) / 4, not -0.125
+    assert ranked.floored == {"bco": {"a": 1}, "abco": {"a": 1}}
+    assert ranked.pairs[("bco", "abco")][0] == pytest.approx(0.5)  # both at 0: a tie, not a loss
 
 
 def test_other_code_versions_are_flagged(reported: dict[str, Any]) -> None:
