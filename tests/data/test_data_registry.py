@@ -1,5 +1,6 @@
 """The registry of the dataset ids: twelve of Table 1, three start-cell pre-demonstrations,
-four procedural ones, one held-action set (Acrobot), then LunarLander's two."""
+four procedural ones, one held-action set (Acrobot), LunarLander's two, then the four
+classic-control expert datasets' version 1."""
 
 import pytest
 
@@ -10,15 +11,18 @@ from abco_data.registry import ADDED_ENVS, ENV_NAMES, TABLE1_ENVS
 
 
 def test_twelve_ids_two_kinds_per_env():
-    assert len(abco_data.DATASET_IDS) == 22
-    assert len(set(abco_data.DATASET_IDS)) == 22
+    assert len(abco_data.DATASET_IDS) == 26
+    assert len(set(abco_data.DATASET_IDS)) == 26
     assert abco_data.DATASET_IDS[12:15] == tuple(f"abco/maze{n}x{n}-pre-start-v0"
                                                  for n in (3, 5, 10))
     assert abco_data.DATASET_IDS[15:19] == tuple(f"abco/maze{n}x{n}-procedural-{k}-v0"
                                                  for n in (5, 10) for k in ("expert", "pre"))
     assert abco_data.DATASET_IDS[19:20] == ("abco/acrobot-pre-held-v0",)
-    assert abco_data.DATASET_IDS[20:] == ("abco/lunarlander-expert-v0",
-                                          "abco/lunarlander-pre-v0")
+    assert abco_data.DATASET_IDS[20:22] == ("abco/lunarlander-expert-v0",
+                                            "abco/lunarlander-pre-v0")
+    assert abco_data.DATASET_IDS[22:] == tuple(f"abco/{name}-expert-v1" for name in
+                                               ("cartpole", "acrobot", "mountaincar",
+                                                "lunarlander"))  # fmt: skip
     for env_id in (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS):
         for kind in ("expert", "pre_demonstrations"):
             s = abco_data.spec(abco_data.dataset_id(env_id, kind))
@@ -32,7 +36,7 @@ def test_lunar_lander_datasets_are_made_as_the_classic_ones():
         lunar = dict(abco_data.spec(f"abco/lunarlander-{kind}-v0").params)
         cartpole = dict(abco_data.spec(f"abco/cartpole-{kind}-v0").params)
         assert {**lunar, "seed": 0} == {**cartpole, "seed": 0}
-    seeds = [abco_data.spec(i).params["seed"] for i in abco_data.DATASET_IDS]
+    seeds = [abco_data.spec(i).params["seed"] for i in abco_data.DATASET_IDS[:22]]
     assert seeds == [(k + 1) * 1_000_000 for k in range(22)]
     assert set(ENV_NAMES) == {*TABLE1_ENVS, *ADDED_ENVS}
 
@@ -44,8 +48,20 @@ def test_id_spelling():
 
 
 def test_seeds_are_distinct():
-    seeds = [abco_data.spec(i).params["seed"] for i in abco_data.DATASET_IDS]
+    seeds = [abco_data.spec(i).params["seed"] for i in abco_data.DATASET_IDS[:22]]
     assert len(set(seeds)) == 22
+
+
+@pytest.mark.parametrize("name", ["cartpole", "acrobot", "mountaincar", "lunarlander"])
+def test_classic_expert_v1_is_v0_with_references_over_more_episodes(name):
+    """Version 1 keeps v0's seed (its episodes' bytes) and raises the reference episodes; it is
+    the default of every run, and v0 stays loadable."""
+    v0, v1 = (abco_data.spec(f"abco/{name}-expert-v{k}").params for k in (0, 1))
+    assert {**v1, "reference_episodes": 100, "reference_expert_episodes": 20} == dict(v0)
+    assert (v1["reference_episodes"], v1["reference_expert_episodes"]) == (2000, 1000)
+    env_id = abco_data.spec(f"abco/{name}-expert-v1").env_id
+    assert abco_data.dataset_id(env_id, "expert") == f"abco/{name}-expert-v1"
+    assert abco_data.dataset_id(env_id, "pre") == f"abco/{name}-pre-v0"
 
 
 def test_held_action_dataset():
