@@ -12,7 +12,8 @@ from abco_data import cli
 def test_list(capsys):
     assert cli.main(["list"]) == 0
     out = capsys.readouterr().out
-    assert out.count("abco/") == 22 and "abco/maze10x10-pre-v0" in out
+    assert out.count("abco/") == 26 and "abco/maze10x10-pre-v0" in out
+    assert "abco/lunarlander-expert-v1" in out  # the classic expert sets' version 1
     assert "abco/lunarlander-expert-v0" in out and "abco/lunarlander-pre-v0" in out
     assert "abco/maze5x5-pre-start-v0" in out  # the authors' regime's pre-demonstrations
 
