@@ -92,6 +92,55 @@ def test_dilo_weights_rise_with_the_utility(tiny_data, tmp_path):
     assert torch.equal(method.weights(s, s1), torch.full((4,), 1.5))
 
 
+def _one_pass_value_step(method: DILO, pre_idx: torch.Tensor, expert_idx: torch.Tensor) -> None:
+    """DILO's value step written with one online pass over both pairs of every triple."""
+    opts, params = method.options, list(method.value.parameters())
+    s, s1, s2 = method._triples(method.pre_rows[pre_idx], method.expert_rows[expert_idx])
+    n, n_pre = len(s), len(pre_idx)
+    first, second = torch.cat([s, s1]), torch.cat([s1, s2])
+    online = method.value(first, second)
+    with torch.no_grad():
+        target = method.target(first, second).min(1, keepdim=True).values
+    fwd, bwd = opts.gamma * target[n:] - online[:n], opts.gamma * online[n:] - target[:n]
+    forward = opts.lam * dual_loss(fwd[n_pre:], fwd[:n_pre], opts.beta)
+    backward = opts.lam * opts.eta * dual_loss(bwd[n_pre:], bwd[:n_pre], opts.beta)
+    g_f = torch.autograd.grad(forward, params, retain_graph=True)
+    g_b = torch.autograd.grad(backward, params, retain_graph=True)
+    g_v = torch.autograd.grad((1 - opts.lam) * online[:n_pre].mean(), params)
+    method.value_opt.zero_grad(set_to_none=True)
+    for p, g, v in zip(params, orthogonal_gradient(list(g_f), list(g_b)), g_v):
+        p.grad = g + v
+    method.value_opt.step()
+
+
+@pytest.mark.parametrize("env_id", ["CartPole-v1", "AbcoMaze3x3-v0"])
+def test_dilo_value_step_is_the_one_pass_update(env_id, tiny_data, tmp_path):
+    """Two online passes (the pairs (s, s') and (s', s'') apart) give the update of one pass
+    over both: the same gradients, summed in another order."""
+    cfg = resolve_config(_config("dilo", env_id, tiny_data, tmp_path))
+    methods = [DILO(cfg, load_training_data(cfg), np.random.default_rng(0)) for _ in range(2)]
+    for p in methods[0].value.parameters():  # attention on: every parameter has a gradient
+        if p.ndim == 0:
+            torch.nn.init.constant_(p, 0.5)
+    for m in methods:  # the same weights in both, the target a copy of V
+        m.value.load_state_dict(methods[0].value.state_dict())
+        m.target.load_state_dict(methods[0].value.state_dict())
+        # plain steps: Adam's first step is lr * sign(g), which would blow up last-bit noise
+        m.value_opt = torch.optim.SGD(m.value.parameters(), lr=0.1)
+        m.value.eval()  # no dropout masks, which the two would draw differently
+    before = [p.detach().clone() for p in methods[0].value.parameters()]
+    pre_idx, expert_idx = torch.tensor([0, 2, 1]), torch.tensor([1, 0])
+    methods[0]._value_step(pre_idx, expert_idx)
+    _one_pass_value_step(methods[1], pre_idx, expert_idx)
+    for a, b, p in zip(methods[0].value.parameters(), methods[1].value.parameters(), before):
+        # the steps agree to a percent (the convolutions' sums differ with the batch's size,
+        # and the orthogonal projection divides by |g_f|^2); a wrong pair would not
+        torch.testing.assert_close(a - p, b - p, rtol=1e-2, atol=1e-6)
+    moved = [not torch.equal(v, t) for v, t in zip(methods[0].value.parameters(),
+                                                   methods[0].target.parameters())]
+    assert sum(moved) > len(moved) // 2  # V stepped (the target only followed it by Polyak)
+
+
 # -- LAPO's bottleneck --------------------------------------------------------------------------
 
 

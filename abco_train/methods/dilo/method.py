@@ -170,26 +170,30 @@ class DILO(OfflineMethod):
         """One orthogonal-gradient Adam step of ``V``; the dual's (forward) loss.
 
         The residual ``gamma V(s', s'') - V(s, s')`` is taken forward (the target network's
-        ``V(s', s'')``, the online ``V(s, s')``) and backward (the other way round); one
-        forward pass of each network reads both pairs of every triple, offline and expert.
+        ``V(s', s'')``, the online ``V(s, s')``) and backward (the other way round). The online
+        network reads the pairs ``(s, s')`` and ``(s', s'')`` in two passes, as the authors'
+        code does: the forward loss and the mean utility reach ``V`` through the first only,
+        the backward loss through the second only, so each of the three gradients runs back
+        through half the rows a single pass over both would hold.
         """
         opts, params = self.options, list(self.value.parameters())
         s, s1, s2 = self._triples(self.pre_rows[pre_idx], self.expert_rows[expert_idx])
         n, n_pre = len(s), len(pre_idx)
-        first, second = torch.cat([s, s1]), torch.cat([s1, s2])
-        online = self.value(first, second)  # (2n, 2): V(s, s') then V(s', s''), twin heads
+        now = self.value(s, s1)  # (n, 2): V(s, s'), twin heads; offline rows first
+        after = self.value(s1, s2)  # V(s', s'')
         with torch.no_grad():  # the smaller target head, for both online heads (TwinQ's min)
-            target = self.target(first, second).min(1, keepdim=True).values
-        forward_residual = opts.gamma * target[n:] - online[:n]
-        backward_residual = opts.gamma * online[n:] - target[:n]
+            target = self.target(torch.cat([s, s1]), torch.cat([s1, s2])
+                                 ).min(1, keepdim=True).values  # fmt: skip
+        forward_residual = opts.gamma * target[n:] - now
+        backward_residual = opts.gamma * after - target[:n]
         forward = opts.lam * dual_loss(forward_residual[n_pre:], forward_residual[:n_pre],
                                        opts.beta)  # fmt: skip
         backward = opts.lam * opts.eta * dual_loss(backward_residual[n_pre:],
                                                    backward_residual[:n_pre], opts.beta)
-        mean_value = (1 - opts.lam) * online[:n_pre].mean()  # V(s, s') on the offline data
+        mean_value = (1 - opts.lam) * now[:n_pre].mean()  # V(s, s') on the offline data
         g_f = torch.autograd.grad(forward, params, retain_graph=True)
-        g_b = torch.autograd.grad(backward, params, retain_graph=True)
         g_v = torch.autograd.grad(mean_value, params)
+        g_b = torch.autograd.grad(backward, params)
         self.value_opt.zero_grad(set_to_none=True)
         for p, g, v in zip(params, orthogonal_gradient(list(g_f), list(g_b)), g_v):
             p.grad = g + v
