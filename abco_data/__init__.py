@@ -14,7 +14,7 @@ own (``local/NAME-v0``) that every reader takes as it takes the built-in ones.
 Example:
     >>> import abco_data
     >>> len(abco_data.DATASET_IDS)
-    22
+    26
     >>> abco_data.dataset_id("CartPole-v1", "pre_demonstrations")
     'abco/cartpole-pre-v0'
 """
