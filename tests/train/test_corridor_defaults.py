@@ -79,7 +79,8 @@ def test_every_idm_method_learns_the_corridor_with_its_defaults(recorded, tmp_pa
 
 
 @pytest.mark.parametrize("method, steps", [("dilo", ["--dilo-steps", "40"]),
-                                           ("lapo", ["--lapo-model-steps", "40",
+                                           ("lapo", ["--lapo-schedule", "steps",
+                                                     "--lapo-model-steps", "40",
                                                      "--lapo-policy-steps", "40"])])
 def test_the_offline_methods_run_on_the_recorded_corridor(recorded, tmp_path, method, steps,
                                                           monkeypatch):  # fmt: skip

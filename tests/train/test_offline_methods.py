@@ -26,7 +26,8 @@ from abco_train.methods.registry import available, get_method, resolve_config
 ENVS = (*abco_envs.MAZE_IDS, *abco_envs.CLASSIC_IDS)
 #: A few gradient steps of each.
 TINY = {"dilo": {"steps": 3, "rounds": 2},
-        "lapo": {"model_steps": 3, "policy_steps": 3, "decoder_epochs": 1, "rounds": 2}}
+        "lapo": {"model_steps": 3, "policy_steps": 3, "decoder_epochs": 1, "rounds": 2,
+                 "schedule": "steps"}}
 
 
 def _config(method, env_id, tiny_data, run_dir, **changes):

@@ -108,7 +108,11 @@ _CLASSIC: dict[str, Any] = {
     "label_smoothing": 0.05, "schedule": "steps", **CONVERGED_DEFAULTS,
 }  # fmt: skip
 OPTION_DEFAULTS: dict[str, dict[str, Any]] = {
-    "classic": _CLASSIC,
+    # Vector tasks train each stage to convergence: on the headline's four classic tasks,
+    # validation seeds 100-102, it scored higher or equal on every task once scores below
+    # random count as random (Acrobot 0.204 -> 0.301, CartPole 0.909 -> 1.000, MountainCar
+    # 0.000 -> 0.008, LunarLander 0 both; docs/notes/fair-fight.md).
+    "classic": {**_CLASSIC, "schedule": "converged"},
     "maze": {**_CLASSIC, "model_steps": 1500, "policy_steps": 1000},
     "image": {**_CLASSIC, "model_steps": 1500, "policy_steps": 1000, "pool": 1},
 }
