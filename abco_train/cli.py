@@ -68,10 +68,19 @@ OPTION_DEST = "method_option__"
 
 
 def _option_flags(args: argparse.Namespace) -> dict[str, Any]:
-    """``--method-options`` JSON with the method options given as flags of their own on top."""
+    """``--method-options`` JSON with the method options given as flags of their own on top;
+    a method's own flag (``--lapo-schedule``) keeps its prefix (``lapo-schedule``): it is that
+    method's option only (:func:`abco_train.methods.registry.scoped_options`)."""
     flags = {k[len(OPTION_DEST):]: v for k, v in vars(args).items()
              if k.startswith(OPTION_DEST) and v is not None}  # fmt: skip
     return {**(args.method_options or {}), **flags}
+
+
+def _method_options_of_train(args: argparse.Namespace) -> dict[str, Any]:
+    """``abco train``'s method options (its parser holds the flags of its method only)."""
+    from abco_train.methods.registry import scoped_options
+
+    return scoped_options(args.method, _option_flags(args))
 
 
 def _add_method_options(parser: argparse.ArgumentParser, options: Sequence[type],
@@ -89,7 +98,7 @@ def _add_method_options(parser: argparse.ArgumentParser, options: Sequence[type]
             continue
         group = parser.add_argument_group(f"{title}: {cls.__name__} (also --method-options keys)")
         add_field_options(group, cls, exclude=set(names) - set(fresh), unset_defaults=True,
-                          prefix=cls.flag_prefix, dest_prefix=OPTION_DEST,
+                          prefix=cls.flag_prefix, dest_prefix=OPTION_DEST + cls.flag_prefix,
                           shown_default="per env and preset")  # fmt: skip
         seen.update(flag_of(n, cls.flag_prefix) for n in fresh)
 
@@ -98,7 +107,7 @@ def _train(args: argparse.Namespace) -> int:
     from abco_train.methods.registry import load_plugins, resolve_config
 
     load_plugins(args.plugin)
-    config = config_from_args(args, method_options=_option_flags(args))
+    config = config_from_args(args, method_options=_method_options_of_train(args))
     config = resolve_config(config)  # every option checked before any work
     from abco_train.harness.evaluation import format_table
     from abco_train.harness.loop import train
@@ -169,21 +178,38 @@ def _bench_plan(args: argparse.Namespace) -> tuple[Any, list[Any]]:
     if (args.envs is None) == (args.track is None):
         raise ConfigError("give --envs (a grid of environments) or --track (a grid of tasks)")
     if args.track is None:
-        if args.tasks is not None:
-            raise ConfigError("--tasks names tasks of a --track")
+        for flag, given in (("--tasks", args.tasks), ("--budget-multiples",
+                                                         args.budget_multiples)):
+            if given is not None:
+                raise ConfigError(f"{flag} applies to a --track grid")
         layouts = [None] if args.layouts is None else parse_layouts(args.layouts)
         seeds = parse_seeds(args.seeds or "0-4")
         return None, plan(parse_list(args.envs), parse_list(args.methods or ""), seeds, layouts)
     if args.layouts is not None:
         raise ConfigError("--layouts is a setting of a track's tasks, not of the grid")
     track = load_track(args.track)
+    if args.budget_multiples is not None:  # the budget curves' points: TASK@xM for each task
+        import dataclasses
+
+        from abco_train.bench.tasks import budget_variants
+
+        chosen = [track.task(n) for n in parse_list(args.tasks)] if args.tasks else track.tasks
+        multiples = [_multiple(m) for m in parse_list(args.budget_multiples)]
+        track = budget_variants(dataclasses.replace(track, tasks=tuple(chosen)), multiples)
     named = {"validation": track.validation_seeds, "test": track.test_seeds}
     text = named.get(args.seeds or "validation", args.seeds)
     if not text:
         raise ConfigError(f"track {track.name} names no {args.seeds} seeds; give them")
     methods = parse_list(args.methods) if args.methods else list(track.methods)
-    tasks = parse_list(args.tasks) if args.tasks else []
+    tasks = parse_list(args.tasks) if args.tasks and args.budget_multiples is None else []
     return track, plan_track(track, tasks, methods, parse_seeds(text))
+
+
+def _multiple(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise ConfigError(f"--budget-multiples: {text[:20]!r} is not a whole number") from None
 
 
 def _bench_options(parser: argparse.ArgumentParser) -> None:
@@ -205,6 +231,10 @@ def _bench_options(parser: argparse.ArgumentParser) -> None:
                         "training on the first K layouts of the procedural datasets, in "
                         "OUT/{env}/{method}/layouts{K}/seed{seed} (e.g. 100,1000,10000; "
                         "default: the standard datasets)")  # fmt: skip
+    parser.add_argument("--budget-multiples", default=None, metavar="M[,M...]",
+                        help="with --track: a budget curve's points instead of the tasks, "
+                        "each task as TASK@xM with M times its budget (and any method option "
+                        "set to the budget, GAIfO's rl_steps, with it), e.g. 4,16")
     parser.add_argument("--choices", default=None, metavar="CHOICES.json",
                         help="with --track: the settings `abco tune` chose for each method "
                         "and task family (its choices.json); options given here win")

@@ -33,7 +33,7 @@ from abco_train.bench.records import RecordError, check_name, escape
 from abco_train.bench.tasks import Track
 from abco_train.config.limits import MAX_SEED
 from abco_train.config.run import MAX_LAYOUTS, ConfigError, RunConfig, env_kind
-from abco_train.methods.registry import options_class
+from abco_train.methods.registry import options_class, scoped_options
 
 __all__ = ["Cell", "CELL_FIELDS", "MAX_CELLS", "parse_seeds", "parse_list", "parse_layouts",
            "plan", "plan_track", "cell_config", "check_method_options", "Tuned"]  # fmt: skip
@@ -244,6 +244,7 @@ def cell_config(
     settings = {f.name for f in fields(RunConfig)}
     options = {**{k: v for k, v in overrides.items() if k not in settings},
                **task.pop("method_options", {}), **(method_options or {})}  # fmt: skip
+    options = scoped_options(cell.method, options)
     own = options_class(cell.method).names()
     return {
         **{k: v for k, v in overrides.items() if k in settings}, **task,
@@ -266,7 +267,9 @@ def check_method_options(methods: Sequence[str], overrides: dict[str, Any] | Non
     given = {k for k, v in (overrides or {}).items() if v is not None and k not in settings}
     given |= set(method_options or {})
     known = {name for m in set(methods) for name in options_class(m).names()}
-    unknown = sorted(given - known)
+    prefixed = {options_class(m).flag_prefix + name for m in set(methods)
+                for name in options_class(m).names()}  # ``lapo-schedule``: one method's own
+    unknown = sorted(given - known - prefixed)
     if unknown:
         raise ConfigError(f"no method of the grid ({', '.join(sorted(set(methods)))}) has "
                           f"option(s) {', '.join(unknown)}; theirs: "

@@ -39,9 +39,10 @@ Example:
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -51,8 +52,8 @@ from abco_train.config.fields import ConfigError
 from abco_train.config.limits import MAX_BUDGET
 from abco_train.config.run import env_kind, validation_block
 
-__all__ = ["Task", "Track", "load_track", "TRACKS_DIR", "BUILTIN_TRACKS", "MAX_TASKS",
-           "MAX_TRACK_BYTES"]  # fmt: skip
+__all__ = ["Task", "Track", "load_track", "budget_variants", "TRACKS_DIR", "BUILTIN_TRACKS",
+           "MAX_TASKS", "MAX_TRACK_BYTES", "MAX_MULTIPLE"]  # fmt: skip
 
 #: Where the built-in tracks live.
 TRACKS_DIR = Path(__file__).with_name("tracks")
@@ -61,6 +62,8 @@ BUILTIN_TRACKS = ("headline",)
 #: Most tasks of a track, and most bytes of a track file (read before parsing).
 MAX_TASKS = 1_000
 MAX_TRACK_BYTES = 1_000_000
+#: Largest budget multiple of a budget curve's variant.
+MAX_MULTIPLE = 64
 #: Run-config fields a task may not set: the grid sets them per cell.
 _PER_CELL = ("env", "method", "seed", "run_dir", "quiet", "threads", "task", "budget",
              "headline", "held_out", "method_options")  # fmt: skip
@@ -246,3 +249,42 @@ def _task(table: Any, index: int) -> Task:
     for method in task.method_settings:
         RunConfig(**{**task.config(method), "method_options": {}}).validate()
     return task
+
+
+def budget_variants(track: Track, multiples: Sequence[int]) -> Track:
+    """``track`` with each task replaced by its budget variants ``{task}@x{M}``: the task
+    unchanged but for its budget, ``M`` times as large, and any method option set to the
+    task's budget (GAIfO's ``rl_steps``: its PPO may spend the whole budget), which follows it.
+
+    These are the points of a budget curve; the 1x point is the task itself.
+
+    Example:
+        >>> curves = budget_variants(load_track("headline"), [4, 16])
+        >>> task = curves.task("lunarlander@x16")
+        >>> task.budget, task.method_options["gaifo"]["rl_steps"]
+        (640000, 640000)
+
+    Raises:
+        ConfigError: No multiple, a multiple outside 2..``MAX_MULTIPLE``, or a budget over
+            the largest a run may have.
+    """
+    if not multiples:
+        raise ConfigError("--budget-multiples names no multiple")
+    tasks = []
+    for task in track.tasks:
+        for multiple in multiples:
+            if not 2 <= multiple <= MAX_MULTIPLE:
+                raise ConfigError(f"--budget-multiples: {multiple} is not a multiple from 2 "
+                                  f"to {MAX_MULTIPLE}")  # fmt: skip
+            budget = task.budget * multiple
+            if budget > MAX_BUDGET:
+                raise ConfigError(f"task {task.name!r} at {multiple}x its budget would have "
+                                  f"{budget:,} interactions; a run has at most {MAX_BUDGET:,}")
+            options = {m: {k: budget if v == task.budget else v for k, v in o.items()}
+                       for m, o in task.method_options.items()}  # fmt: skip
+            tasks.append(dataclasses.replace(
+                task, name=f"{task.name}@x{multiple}", budget=budget, method_options=options,
+                measures=f"The task {task.name} with {multiple} times its budget."))
+    if len(tasks) > MAX_TASKS:
+        raise ConfigError(f"{len(tasks):,} budget variants; a track has at most {MAX_TASKS:,}")
+    return dataclasses.replace(track, name=f"{track.name}-budget-curves", tasks=tuple(tasks))

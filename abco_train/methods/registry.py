@@ -19,7 +19,8 @@ from abco_train.methods.base import Method
 
 __all__ = ["register", "get_method", "available", "load_plugins", "resolve_config",
            "PluginError", "BUILTIN_MODULES", "config_from_record", "identity",
-           "builtin_options", "method_names", "options_class"]  # fmt: skip
+           "builtin_options", "method_names", "options_class", "scoped_options",
+           "scope_of"]  # fmt: skip
 
 #: Modules whose import registers the built-in methods (imported on first lookup).
 BUILTIN_MODULES = (
@@ -95,6 +96,30 @@ def builtin_options() -> dict[str, type[MethodOptions]]:
     return {**dict.fromkeys(VARIANTS, BCOOptions), "iupe": BCOOptions, "ilpo": ILPOOptions,
             "gaifo": GAIfOOptions, "dilo": DILOOptions, "lapo": LAPOOptions,
             "random": MethodOptions, "expert": MethodOptions}  # fmt: skip
+
+
+def scoped_options(method: str, options: Mapping[str, Any]) -> dict[str, Any]:
+    """``options`` as they apply to ``method``: a plain name (``idm_epochs``, from a shared
+    flag) to every method that has it; a name under a method's flag prefix (``lapo-schedule``,
+    from ``--lapo-schedule``) to the methods whose options carry that prefix only, over a
+    plain one of the same name. Field names hold no ``-``, so the prefix ends at the last.
+
+    Example:
+        >>> scoped_options("bco", {"schedule": "epochs", "lapo-schedule": "steps"})
+        {'schedule': 'epochs'}
+        >>> scoped_options("lapo", {"schedule": "converged", "lapo-schedule": "steps"})
+        {'schedule': 'steps'}
+    """
+    prefix = options_class(method).flag_prefix
+    plain = {k: v for k, v in options.items() if "-" not in k}
+    own = {k[len(prefix):]: v for k, v in options.items()
+           if prefix and k.startswith(prefix) and "-" not in k[len(prefix):]}  # fmt: skip
+    return {**plain, **own}
+
+
+def scope_of(key: str) -> str:
+    """The flag prefix of an option key (``lapo-`` of ``lapo-schedule``; ``""`` if plain)."""
+    return key[: key.rfind("-") + 1]
 
 
 def options_class(name: str) -> type[MethodOptions]:

@@ -46,11 +46,13 @@ class SelfAttention2d(nn.Module):
         tokens = x.flatten(2).transpose(1, 2)  # (B, N, C): one token per position
         key, query, value = self.key(tokens), self.query(tokens), self.value(tokens)
         if h * w < SHORT_SOFTMAX:
-            # torch's CPU softmax over a last dim shorter than one vector register runs
-            # element by element (about 3x slower fore and back at the vector encoder's 12
-            # features); the same softmax over dim 1 of the transposed scores does not
-            scores_t = torch.bmm(key, query.transpose(1, 2))  # s[i, j] = f(x_i) . g(x_j)
-            beta = torch.softmax(scores_t, dim=1).transpose(1, 2)  # over positions i
+            # torch's CPU softmax over a dim shorter than one vector register runs element by
+            # element when that dim is last (about 3x slower fore and back at the vector
+            # encoder's 12 features), and on a few lanes when it is the middle one; laid out
+            # (i, B, j), the softmax over the leading i has B * N lanes to vectorise over
+            scores_t = torch.bmm(key, query.transpose(1, 2))  # s[b, i, j] = f(x_i) . g(x_j)
+            beta_t = torch.softmax(scores_t.permute(1, 0, 2).contiguous(), dim=0)  # over i
+            beta = beta_t.permute(1, 2, 0)  # (B, j, i)
         else:
             scores = torch.bmm(query, key.transpose(1, 2))  # s[j, i] = g(x_j) . f(x_i)
             beta = torch.softmax(scores, dim=-1)  # over the attended positions i

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from abco_train.bench.cells import Cell, cell_config, check_method_options
-from abco_train.cli import build_parser, main
+from abco_train.cli import _option_flags, build_parser, main
 from abco_train.config.fields import ConfigError, MethodOptions, option
 from abco_train.config.run import MOVED_TO_METHOD_OPTIONS, RunConfig
 from abco_train.harness.run_folder import finished_result
@@ -73,7 +73,7 @@ def test_resolved_options_are_stored_whole() -> None:
 def test_flags_follow_the_method(capsys: pytest.CaptureFixture[str]) -> None:
     argv = ["train", "--method", "ilpo", "--ilpo-latents", "5"]
     args = build_parser(argv).parse_args(argv)
-    assert args.method_option__latents == 5
+    assert _option_flags(args) == {"ilpo-latents": 5}  # ILPO's own flag, its prefix kept
     with pytest.raises(SystemExit):
         build_parser(["train", "--method", "ilpo"]).parse_args(["train", "--idm-epochs", "2"])
     capsys.readouterr()
@@ -93,6 +93,23 @@ def test_a_grid_gives_each_method_its_own_options(tmp_path: Path) -> None:
     check_method_options(["abco", "ilpo"], options, {"latents": 3})
     with pytest.raises(ConfigError, match="no method of the grid \\(gaifo\\) has option"):
         check_method_options(["gaifo"], options, None)
+
+
+def test_a_methods_own_flag_reaches_that_method_only(tmp_path: Path) -> None:
+    """``--lapo-schedule steps`` in a grid with the BCO family sets LAPO's schedule and
+    nobody else's (a plain ``schedule`` reaches every method that has one, LAPO's flag wins)."""
+    argv = ["bench", "--envs", "CartPole-v1", "--methods", "bco,lapo", "--out", "x",
+            "--lapo-schedule", "steps", "--schedule", "epochs"]
+    flags = _option_flags(build_parser(argv).parse_args(argv))
+    assert flags == {"lapo-schedule": "steps", "schedule": "epochs"}
+    check_method_options(["bco", "lapo"], None, flags)
+    configs = {m: cell_config(Cell("CartPole-v1", m, 0), tmp_path, {}, 1, flags)
+               for m in ("bco", "lapo", "dilo")}  # fmt: skip
+    assert configs["bco"]["method_options"] == {"schedule": "epochs"}
+    assert configs["lapo"]["method_options"] == {"schedule": "steps"}
+    assert configs["dilo"]["method_options"] == {"schedule": "epochs"}
+    with pytest.raises(ConfigError, match="has option\\(s\\) lapo-schedule"):
+        check_method_options(["bco"], None, {"lapo-schedule": "steps"})
 
 
 def test_a_folder_from_before_the_options_moved_is_still_recognised(tmp_path: Path) -> None:

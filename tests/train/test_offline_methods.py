@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 import subprocess
 import sys
@@ -140,6 +141,28 @@ def test_dilo_value_step_is_the_one_pass_update(env_id, tiny_data, tmp_path):
     moved = [not torch.equal(v, t) for v, t in zip(methods[0].value.parameters(),
                                                    methods[0].target.parameters())]
     assert sum(moved) > len(moved) // 2  # V stepped (the target only followed it by Polyak)
+
+
+@pytest.mark.parametrize("env_id", ["CartPole-v1", "AbcoMaze3x3-v0"])
+def test_lapo_policy_targets_are_the_frozen_idms_latents(env_id, tiny_data, tmp_path):
+    """Stage 2 regresses on ``z = IDM(s, s')`` computed once after stage 1: the values a
+    minibatch's own pass gives, recomputed after the IDM changes (stage 1, a restore)."""
+    cfg = resolve_config(_config("lapo", env_id, tiny_data, tmp_path))
+    method = LAPO(cfg, load_training_data(cfg), np.random.default_rng(0))
+    method.train_iteration(0)
+    rows = torch.tensor([2, 0, 1, 2])
+    with torch.no_grad():
+        method.idm.eval()
+        direct = method.idm(*method.data_t.expert_pairs(rows))
+    torch.testing.assert_close(method._expert_latents()[rows], direct, rtol=1e-5, atol=1e-6)
+    state = copy.deepcopy(method.state_dict())
+    with torch.no_grad():
+        for p in method.idm.parameters():
+            p.add_(1.0)
+    method._expert_z = None  # refilled from the changed IDM
+    assert not torch.allclose(method._expert_latents()[rows], direct)
+    method.load_state_dict(state)  # dropped again: the restored IDM's latents
+    torch.testing.assert_close(method._expert_latents()[rows], direct, rtol=1e-5, atol=1e-6)
 
 
 # -- LAPO's bottleneck --------------------------------------------------------------------------

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -151,34 +152,74 @@ def test_bench_runs_a_track(tmp_path):
          "CartPole-v1", "--out", str(out)], capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     assert both.returncode == 2 and "give --envs" in both.stderr
+    curve = subprocess.run(
+        [sys.executable, "-m", "abco_train", "bench", "--track", track, "--out", str(out),
+         "--methods", "expert", "--budget-multiples", "4", "--eval-episodes", "3", "--quiet"],
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert curve.returncode == 0, curve.stderr
+    record = json.loads((out / "cp@x4/expert/seed100/final.json").read_text())
+    assert (record["task"], record["budget"]) == ("cp@x4", 400)
 
 
-def test_budget_curves_are_the_headline_tasks_with_budgets_multiplied():
-    """Each budget variant ``TASK@xM`` is its headline task but for the budget (and GAIfO's
-    PPO steps): settings, per-method settings and every other option the same."""
+@pytest.mark.parametrize("flags, message", [
+    (["--budget-multiples", "1"], "1 is not a multiple from 2 to 64"),
+    (["--budget-multiples", "4x"], "'4x' is not a whole number"),
+    (["--budget-multiples", "4", "--envs", "CartPole-v1"], "applies to a --track grid"),
+])  # fmt: skip
+def test_budget_multiples_refusals(tmp_path, flags, message):
+    args = ["--track", "headline"] if "--envs" not in flags else []
+    run = subprocess.run([sys.executable, "-m", "abco_train", "bench", *args, *flags, "--out",
+                          str(tmp_path / "grid")], capture_output=True, text=True, timeout=600)
+    assert run.returncode == 2 and message in run.stderr, run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "grid").exists()
+
+
+def test_v1_budget_curves_are_the_headline_variants():
+    """The v1 budget curves' track file holds what ``abco bench --budget-multiples 4,16``
+    makes of its two headline tasks: each ``TASK@xM`` its task but for the budget and GAIfO's
+    PPO steps (settings, per-method settings, every other option the same)."""
+    from abco_train.bench.tasks import budget_variants
     from abco_train.report.budget_curves import variant_of
 
     root = Path(__file__).resolve().parents[2]
     headline = load_track("headline")
     curves = load_track(root / "docs/results/headline/budget-curves.toml")
     assert curves.test_seeds and set(curves.methods) == {"gaifo", "abco"}
-    bases = set()
+    bases = sorted({variant_of(t.name)[0] for t in curves.tasks})  # type: ignore[index]
+    assert bases == ["acrobot-ten-random-episodes", "lunarlander"]
+    chosen = replace(headline, tasks=tuple(headline.task(b) for b in bases))
+    made = budget_variants(chosen, [4, 16])
+    assert [t.name for t in made.tasks] == [t.name for t in curves.tasks]
     for task in curves.tasks:
-        found = variant_of(task.name)
-        assert found is not None, task.name
-        base, multiple = headline.task(found[0]), found[1]
-        bases.add(base.name)
-        assert (task.env, task.headline, dict(task.settings)) == \
-            (base.env, base.headline, dict(base.settings)), task.name  # fmt: skip
-        settings = {m: dict(s) for m, s in base.method_settings.items() if m in curves.methods}
-        assert {m: dict(s) for m, s in task.method_settings.items()} == settings, task.name
-        assert task.budget == base.budget * multiple, task.name
-        options = {m: dict(o) for m, o in task.method_options.items()}
-        assert options.pop("gaifo")["rl_steps"] == task.budget
-        assert options == {m: dict(o) for m, o in base.method_options.items() if m != "gaifo"}
-        gaifo = {k: v for k, v in base.method_options.get("gaifo", {}).items() if k != "rl_steps"}
-        assert {k: v for k, v in task.method_options["gaifo"].items() if k != "rl_steps"} == gaifo
-    assert len(bases) == 2
+        want = made.task(task.name)
+        assert (task.env, task.budget, task.headline, dict(task.settings)) == \
+            (want.env, want.budget, want.headline, dict(want.settings)), task.name  # fmt: skip
+        assert {m: dict(s) for m, s in task.method_settings.items()} == \
+            {m: dict(s) for m, s in want.method_settings.items() if m in curves.methods}
+        assert {m: dict(o) for m, o in task.method_options.items()} == \
+            {m: dict(o) for m, o in want.method_options.items()}  # fmt: skip
+        assert task.method_options["gaifo"]["rl_steps"] == task.budget
+
+
+def test_budget_variants_scale_the_budget_only():
+    from abco_train.bench.tasks import budget_variants
+
+    headline = load_track("headline")
+    made = budget_variants(headline, [4])
+    assert len(made.tasks) == len(headline.tasks)
+    for base, task in zip(headline.tasks, made.tasks):
+        assert task.name == f"{base.name}@x4" and task.budget == 4 * base.budget
+        assert task.settings == base.settings and task.method_settings == base.method_settings
+        for method, options in base.method_options.items():  # only options at the budget
+            assert task.method_options[method] == {
+                k: 4 * v if v == base.budget else v for k, v in options.items()}
+    with pytest.raises(ConfigError, match="65 is not a multiple from 2 to 64"):
+        budget_variants(headline, [65])
+    huge = replace(headline, tasks=(replace(headline.tasks[0], budget=10**9),))
+    with pytest.raises(ConfigError, match="a run has at most 10,000,000,000"):
+        budget_variants(huge, [16])
 
 
 def test_every_method_of_a_headline_task_sees_the_same_inputs_and_encoder(tmp_path):

@@ -60,9 +60,15 @@ def test_attention_is_the_papers_softmax_on_either_path(side, monkeypatch):
     beta = torch.exp(query @ key.transpose(1, 2))
     beta = beta / beta.sum(-1, keepdim=True)
     expected = sa.out(beta @ value).transpose(1, 2).reshape(x.shape)
+    grads = []
     for threshold in (0, 10_000):  # every map on the long path, then on the short one
         monkeypatch.setattr(layers, "SHORT_SOFTMAX", threshold)
         torch.testing.assert_close(sa.attend(x), expected, rtol=1e-5, atol=1e-6)
+        sa.zero_grad()
+        sa.attend(x).square().sum().backward()
+        grads.append([p.grad.clone() for p in (sa.key.weight, sa.query.weight, sa.value.weight)])
+    for long_path, short_path in zip(*grads):  # the backward passes agree too
+        torch.testing.assert_close(short_path, long_path, rtol=1e-4, atol=1e-5)
 
 
 def test_feature_attention_is_not_a_single_token():

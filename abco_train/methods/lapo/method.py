@@ -114,6 +114,7 @@ class LAPO(OfflineMethod):
         self.policy_opt = torch.optim.Adam(self.policy.parameters(), lr=opts.policy_lr)
         self.decoder_opt = torch.optim.Adam(self.decoder.parameters())
         self.stats: dict[str, float] = {}
+        self._expert_z: torch.Tensor | None = None  # stage 2's targets, once stage 1 is done
         # -- the rows each stage trains on, and those held out (converged schedule only) --
         self.schedule = schedule_of(opts)
         held = self.schedule is not None
@@ -189,6 +190,7 @@ class LAPO(OfflineMethod):
     def _fit_model(self, batch: int) -> dict[str, float]:
         """Stage 1: ``model_steps`` steps, or (converged) until its held-out score stops
         improving; the mean losses of the last (up to) 100 steps."""
+        self._expert_z = None
         for net in (self.idm, self.fdm, self.vq):
             net.train()
         losses: list[tuple[float, float]] = []
@@ -259,13 +261,19 @@ class LAPO(OfflineMethod):
         return {"decoder_loss": out["loss"], "decoder_updates": out["updates"],
                 "decoder_held_out_accuracy": out["best"]}  # fmt: skip
 
+    def _expert_latents(self) -> torch.Tensor:
+        """``z`` of every expert transition, stage 2's targets: the IDM is frozen after stage
+        1, so they are computed once (the same values, row by row, as per minibatch)."""
+        if self._expert_z is None:
+            with torch.no_grad():
+                self._expert_z = self.latents(self.data_t.expert_pairs,
+                                              len(self.data_t.expert_t))  # fmt: skip
+        return self._expert_z
+
     def _policy_loss(self, rows: torch.Tensor) -> torch.Tensor:
         """``|| pi(s) - sg(z) ||^2`` on expert transitions ``rows``."""
-        s, s1 = self.data_t.expert_pairs(rows)
-        with torch.no_grad():
-            self.idm.eval()
-            z = self.idm(s, s1)
-        return F.mse_loss(self.policy(s), z)
+        s = self.data_t.expert_obs[self.data_t.expert_t[rows]]
+        return F.mse_loss(self.policy(s), self._expert_latents()[rows])
 
     def _policy_step(self, batch: int) -> float:
         """One Adam step of ``|| pi(s) - sg(z) ||^2`` on expert transitions."""
@@ -374,6 +382,7 @@ class LAPO(OfflineMethod):
             raise TypeError("LAPO's statistics are not a dict of floats")
         for name in ("idm", "vq", "fdm", "policy", "decoder"):
             getattr(self, name).load_state_dict(state[name])
+        self._expert_z = None  # the restored IDM's, when stage 2 next needs them
         for name in ("model_opt", "policy_opt", "decoder_opt"):
             getattr(self, name).load_state_dict(state[name])
         self.stats = dict(stats)
