@@ -14,6 +14,7 @@ without it (:func:`state_network`).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -38,6 +39,13 @@ class OfflineMethod(Method):
 
     online = False
     options: Any  # its options class has ``rounds`` (DILOOptions, LAPOOptions)
+
+    @classmethod
+    def defaults(cls, name: str) -> Mapping[str, Any]:
+        """No self-attention by default: DILO's and LAPO's papers train plain networks, and
+        the attention is ABCO's own (and IUPE's); the BCO family, ILPO and GAIfO go without
+        it too (``--attention`` puts it back)."""
+        return {"attention": False}
 
     @property
     def num_iterations(self) -> int:

@@ -119,9 +119,10 @@ def _one_pass_value_step(method: DILO, pre_idx: torch.Tensor, expert_idx: torch.
 def test_dilo_value_step_is_the_one_pass_update(env_id, tiny_data, tmp_path):
     """Two online passes (the pairs (s, s') and (s', s'') apart) give the update of one pass
     over both: the same gradients, summed in another order."""
-    cfg = resolve_config(_config("dilo", env_id, tiny_data, tmp_path))
+    # with the attention (an option): its gates at 0.5, so every parameter has a gradient
+    cfg = resolve_config(_config("dilo", env_id, tiny_data, tmp_path, attention=True))
     methods = [DILO(cfg, load_training_data(cfg), np.random.default_rng(0)) for _ in range(2)]
-    for p in methods[0].value.parameters():  # attention on: every parameter has a gradient
+    for p in methods[0].value.parameters():
         if p.ndim == 0:
             torch.nn.init.constant_(p, 0.5)
     for m in methods:  # the same weights in both, the target a copy of V
@@ -251,6 +252,16 @@ def test_a_resumed_run_equals_an_uninterrupted_one(method, tiny_data, tmp_path):
     other = _config(method, "AbcoMaze3x3-v0", tiny_data, tmp_path / "other", seed=1)
     train(other)
     assert _numbers(tmp_path / "other")[0] != _numbers(tmp_path / "straight")[0]
+
+
+@pytest.mark.parametrize("method", ["dilo", "lapo"])
+@pytest.mark.parametrize("env_id", ["CartPole-v1", "AbcoMaze3x3-v0"])
+def test_no_attention_by_default_as_in_their_papers(method, env_id, tmp_path):
+    """Their papers' networks carry no self-attention (ABCO's own); ``--attention`` adds it."""
+    assert resolve_config(RunConfig(env=env_id, method=method, run_dir=str(tmp_path))
+                          ).attention is False  # fmt: skip
+    assert resolve_config(RunConfig(env=env_id, method=method, run_dir=str(tmp_path),
+                                    attention=True)).attention is True  # fmt: skip
 
 
 def test_options_defaults_and_checks():
