@@ -189,13 +189,10 @@ def _bench_plan(args: argparse.Namespace) -> tuple[Any, list[Any]]:
         raise ConfigError("--layouts is a setting of a track's tasks, not of the grid")
     track = load_track(args.track)
     if args.budget_multiples is not None:  # the budget curves' points: TASK@xM for each task
-        import dataclasses
-
         from abco_train.bench.tasks import budget_variants
 
-        chosen = [track.task(n) for n in parse_list(args.tasks)] if args.tasks else track.tasks
-        multiples = [_multiple(m) for m in parse_list(args.budget_multiples)]
-        track = budget_variants(dataclasses.replace(track, tasks=tuple(chosen)), multiples)
+        track = budget_variants(track, parse_list(args.budget_multiples),
+                                parse_list(args.tasks) if args.tasks else None)  # fmt: skip
     named = {"validation": track.validation_seeds, "test": track.test_seeds}
     text = named.get(args.seeds or "validation", args.seeds)
     if not text:
@@ -203,13 +200,6 @@ def _bench_plan(args: argparse.Namespace) -> tuple[Any, list[Any]]:
     methods = parse_list(args.methods) if args.methods else list(track.methods)
     tasks = parse_list(args.tasks) if args.tasks and args.budget_multiples is None else []
     return track, plan_track(track, tasks, methods, parse_seeds(text))
-
-
-def _multiple(text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise ConfigError(f"--budget-multiples: {text[:20]!r} is not a whole number") from None
 
 
 def _bench_options(parser: argparse.ArgumentParser) -> None:

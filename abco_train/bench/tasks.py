@@ -251,10 +251,12 @@ def _task(table: Any, index: int) -> Task:
     return task
 
 
-def budget_variants(track: Track, multiples: Sequence[int]) -> Track:
-    """``track`` with each task replaced by its budget variants ``{task}@x{M}``: the task
-    unchanged but for its budget, ``M`` times as large, and any method option set to the
-    task's budget (GAIfO's ``rl_steps``: its PPO may spend the whole budget), which follows it.
+def budget_variants(track: Track, multiples: Sequence[int | str],
+                    tasks: Sequence[str] | None = None) -> Track:  # fmt: skip
+    """``track`` with each task (of ``tasks``, or all) replaced by its budget variants
+    ``{task}@x{M}``: the task unchanged but for its budget, ``M`` times as large, and any
+    method option set to the task's budget (GAIfO's ``rl_steps``: its PPO may spend the whole
+    budget), which follows it. ``multiples`` may be text (``abco bench --budget-multiples``).
 
     These are the points of a budget curve; the 1x point is the task itself.
 
@@ -265,14 +267,22 @@ def budget_variants(track: Track, multiples: Sequence[int]) -> Track:
         (640000, 640000)
 
     Raises:
-        ConfigError: No multiple, a multiple outside 2..``MAX_MULTIPLE``, or a budget over
-            the largest a run may have.
+        ConfigError: No multiple, one that is not a whole number from 2 to ``MAX_MULTIPLE``,
+            an unknown task, or a budget over the largest a run may have.
     """
     if not multiples:
         raise ConfigError("--budget-multiples names no multiple")
-    tasks = []
-    for task in track.tasks:
-        for multiple in multiples:
+    whole = []
+    for text in multiples:
+        try:
+            whole.append(int(text))
+        except ValueError:
+            raise ConfigError(f"--budget-multiples: {str(text)[:20]!r} is not a whole number"
+                              ) from None  # fmt: skip
+    chosen = [track.task(name) for name in tasks] if tasks else list(track.tasks)
+    variants = []
+    for task in chosen:
+        for multiple in whole:
             if not 2 <= multiple <= MAX_MULTIPLE:
                 raise ConfigError(f"--budget-multiples: {multiple} is not a multiple from 2 "
                                   f"to {MAX_MULTIPLE}")  # fmt: skip
@@ -282,9 +292,11 @@ def budget_variants(track: Track, multiples: Sequence[int]) -> Track:
                                   f"{budget:,} interactions; a run has at most {MAX_BUDGET:,}")
             options = {m: {k: budget if v == task.budget else v for k, v in o.items()}
                        for m, o in task.method_options.items()}  # fmt: skip
-            tasks.append(dataclasses.replace(
+            variants.append(dataclasses.replace(
                 task, name=f"{task.name}@x{multiple}", budget=budget, method_options=options,
                 measures=f"The task {task.name} with {multiple} times its budget."))
-    if len(tasks) > MAX_TASKS:
-        raise ConfigError(f"{len(tasks):,} budget variants; a track has at most {MAX_TASKS:,}")
-    return dataclasses.replace(track, name=f"{track.name}-budget-curves", tasks=tuple(tasks))
+    if len(variants) > MAX_TASKS:
+        raise ConfigError(f"{len(variants):,} budget variants; a track has at most "
+                          f"{MAX_TASKS:,}")  # fmt: skip
+    return dataclasses.replace(track, name=f"{track.name}-budget-curves",
+                               tasks=tuple(variants))  # fmt: skip
