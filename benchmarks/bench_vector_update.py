@@ -4,10 +4,10 @@ The vector encoder's self-attention attends over a dozen feature positions. Torc
 softmax over a last dimension that short is slow fore and back, so
 :meth:`abco_train.networks.layers.SelfAttention2d.attend` takes the same softmax over the
 leading dim of the scores laid out ``(i, B, j)`` on maps shorter than ``SHORT_SOFTMAX``
-positions. This script times
-one update of the BCO family's vector IDM and policy (cross-entropy on both, Adam, batch 512,
-one torch thread) with that path and with torch's last-dimension softmax (the peer: the form
-every map took before), interleaved round by round, and prints the medians and their ratio.
+positions. This script times one update of the BCO family's vector IDM and policy
+(cross-entropy on both, Adam, batch 512, one torch thread) with that path and with torch's
+last-dimension softmax (the peer: the form every map took before), interleaved round by
+round, and prints the medians and their ratio.
 
 Usage::
 

@@ -279,13 +279,13 @@ def budget_variants(track: Track, multiples: Sequence[int | str],
         except ValueError:
             raise ConfigError(f"--budget-multiples: {str(text)[:20]!r} is not a whole number"
                               ) from None  # fmt: skip
+        if not 2 <= whole[-1] <= MAX_MULTIPLE:
+            raise ConfigError(f"--budget-multiples: {whole[-1]} is not a multiple from 2 to "
+                              f"{MAX_MULTIPLE}")  # fmt: skip
     chosen = [track.task(name) for name in tasks] if tasks else list(track.tasks)
     variants = []
     for task in chosen:
         for multiple in whole:
-            if not 2 <= multiple <= MAX_MULTIPLE:
-                raise ConfigError(f"--budget-multiples: {multiple} is not a multiple from 2 "
-                                  f"to {MAX_MULTIPLE}")  # fmt: skip
             budget = task.budget * multiple
             if budget > MAX_BUDGET:
                 raise ConfigError(f"task {task.name!r} at {multiple}x its budget would have "

@@ -19,8 +19,7 @@ from abco_train.methods.base import Method
 
 __all__ = ["register", "get_method", "available", "load_plugins", "resolve_config",
            "PluginError", "BUILTIN_MODULES", "config_from_record", "identity",
-           "builtin_options", "method_names", "options_class", "scoped_options",
-           "scope_of"]  # fmt: skip
+           "builtin_options", "method_names", "options_class", "scoped_options"]  # fmt: skip
 
 #: Modules whose import registers the built-in methods (imported on first lookup).
 BUILTIN_MODULES = (
@@ -115,11 +114,6 @@ def scoped_options(method: str, options: Mapping[str, Any]) -> dict[str, Any]:
     own = {k[len(prefix):]: v for k, v in options.items()
            if prefix and k.startswith(prefix) and "-" not in k[len(prefix):]}  # fmt: skip
     return {**plain, **own}
-
-
-def scope_of(key: str) -> str:
-    """The flag prefix of an option key (``lapo-`` of ``lapo-schedule``; ``""`` if plain)."""
-    return key[: key.rfind("-") + 1]
 
 
 def options_class(name: str) -> type[MethodOptions]:
