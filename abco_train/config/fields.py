@@ -32,6 +32,7 @@ import types
 import typing
 from collections.abc import Callable, Collection, Mapping
 from dataclasses import MISSING, Field, asdict, dataclass, field, fields
+from functools import partial
 from typing import Any, ClassVar
 
 from typing_extensions import Self
@@ -55,17 +56,29 @@ def option(help: str, default: Any = None, **checks: Any) -> Any:
 class Search:
     """The range a tuner (``abco tune``) searches for a setting: numbers from ``low`` to
     ``high`` (``log``: on a log scale; whole numbers for an ``int`` setting), or one of
-    ``choices``.
+    ``choices``. ``read_when``: ``(option, value)`` pairs that must all hold of a run's
+    resolved options for it to read the setting at all (an epoch count under a converged
+    schedule is never read: a tuner that drew it would search nothing).
 
     Example:
         >>> Search(1e-4, 1e-2, log=True).describe(float), Search(choices=(32, 64)).describe(int)
         ('float in [0.0001, 0.01], log scale', 'one of 32, 64')
+        >>> epochs = Search(1, 16, read_when=(("schedule", "epochs"),))
+        >>> epochs.describe(int), epochs.reads({"schedule": "converged"})
+        ('int in [1, 16] (read where schedule is epochs)', False)
     """
 
     low: float = 0.0
     high: float = 0.0
     log: bool = False
     choices: tuple[Any, ...] = ()
+    read_when: tuple[tuple[str, Any], ...] = ()
+
+    def reads(self, options: Any) -> bool:
+        """Whether a run with the resolved ``options`` (a mapping or an options object) reads
+        the setting."""
+        get = options.get if isinstance(options, Mapping) else partial(getattr, options)
+        return all(get(name) == value for name, value in self.read_when)
 
     def suggest(self, trial: Any, name: str, kind: type) -> Any:
         """The value an Optuna ``trial`` suggests for the setting ``name`` of type ``kind``."""
@@ -86,9 +99,17 @@ class Search:
     def describe(self, kind: type) -> str:
         """The range in words."""
         if self.choices:
-            return "one of " + ", ".join(map(str, self.choices))
+            return "one of " + ", ".join(map(str, self.choices)) + self._condition()
         low, high = (int(self.low), int(self.high)) if kind is int else (self.low, self.high)
-        return f"{kind.__name__} in [{low}, {high}]" + (", log scale" if self.log else "")
+        text = f"{kind.__name__} in [{low}, {high}]" + (", log scale" if self.log else "")
+        return text + self._condition()
+
+    def _condition(self) -> str:
+        if not self.read_when:
+            return ""
+        return " (read where " + " and ".join(
+            f"{name} is {'unset' if value is None else value}"
+            for name, value in self.read_when) + ")"  # fmt: skip
 
 
 def search_space(cls: type) -> dict[str, tuple[Search, type]]:

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from abco_train.config.fields import option
+from abco_train.config.fields import Search, option
 from abco_train.config.limits import MAX_STEPS
 
 if TYPE_CHECKING:  # the options' modules import this one, and no torch (fast --help)
@@ -43,6 +43,10 @@ LOSS_GAIN = 0.01
 #: ``docs/notes/fair-fight.md``).
 CONVERGED_DEFAULTS: dict[str, int] = {"check_updates": 100, "patience_checks": 5,
                                       "min_fit_updates": 500, "max_fit_updates": 20_000}
+
+#: What a tuner searches of the schedule, where a run converges: how long a fit waits for a
+#: better held-out score (the updates' count of a converged fit is its own, not a setting).
+_CONVERGED_SEARCH = {"patience_checks": Search(2, 10, read_when=(("schedule", "converged"),))}
 
 _CONVERGED_HELP = {
     "check_updates": "converged: minibatch updates between held-out checks",
@@ -71,7 +75,9 @@ def schedule_option(fixed: str, what: str) -> Any:
 
 def converged_option(name: str) -> Any:
     """One of the converged schedule's four options (:data:`CONVERGED_DEFAULTS`' names)."""
-    return option(_CONVERGED_HELP[name], min=1, max=MAX_STEPS)
+    search = _CONVERGED_SEARCH.get(name)
+    return option(_CONVERGED_HELP[name], min=1, max=MAX_STEPS,
+                  **({"search": search} if search else {}))
 
 
 def schedule_of(options: Any) -> Schedule | None:

@@ -33,6 +33,10 @@ def add_tune_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True,
                         help="the tuning folder: optuna.journal, trials.jsonl, choices.json, "
                         "tuning.md and the trials' runs")  # fmt: skip
+    parser.add_argument("--seeds", default=None,
+                        help="the validation seeds a trial runs, some of the track's (e.g. "
+                        "100; default: all of them): the same for every method, and for "
+                        "every trial of a study")  # fmt: skip
     parser.add_argument("--jobs", type=count(MAX_JOBS), default=None,
                         help="a trial's cells at once (default: the cores)")
     parser.add_argument("--threads", type=count(MAX_THREADS), default=None,
@@ -42,7 +46,7 @@ def add_tune_options(parser: argparse.ArgumentParser) -> None:
 
 def run_tune(args: argparse.Namespace) -> int:
     """Run ``abco tune``; print each method's trials and best value."""
-    from abco_train.bench.cells import parse_list
+    from abco_train.bench.cells import parse_list, parse_seeds
     from abco_train.bench.tasks import load_track
     from abco_train.config.fields import ConfigError
     from abco_train.report.headline import REFERENCE_METHODS
@@ -64,7 +68,8 @@ def run_tune(args: argparse.Namespace) -> int:
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {args.out!r} is not a folder")
     spec = TuneSpec(track, args.family, tuple(methods), args.trials, out, args.jobs,
-                    args.threads, args.quiet, tuple(args.plugin))  # fmt: skip
+                    args.threads, args.quiet, tuple(args.plugin),
+                    tuple(parse_seeds(args.seeds)) if args.seeds else None)  # fmt: skip
     for method, done in tune(spec).items():
         print(f"{args.family}/{method}: {done['trials']} trials, best {done['best']:.3f} "
               f"(trial {done['best_trial']})")

@@ -134,13 +134,29 @@ def _markdown(rows: list[TrialRow], track: Track) -> list[str]:
         lines.append(f"| {family} | {escape(method, 60)} | {len(mine)} | {default} | "
                      f"{row.value:.3f} | {row.trial} | {_settings(row.params)} |")
     lines += ["", "## Search spaces", ""]
-    lines += [f"- `{escape(m, 60)}`: {describe(m)}" for m in dict.fromkeys(r.method for r in rows)]
+    lines += [f"- {family}, `{escape(method, 60)}`: "
+              f"{describe(method, _resolved(track, method, family, rows))}"
+              for method, family in dict.fromkeys((r.method, r.family) for r in rows)]
     lines += ["", "## Trials", "", "| Family | Method | Trial | Value | Failed runs | Settings |",
               "|---|---|---:|---:|---:|---|"]  # fmt: skip
     for r in rows:
         lines.append(f"| {r.family} | {escape(r.method, 60)} | {r.trial} | {r.value:.3f} | "
                      f"{len(r.failures)} | {_settings(r.params)} |")
     return lines
+
+
+def _resolved(track: Track, method: str, family: str, rows: list[TrialRow]) -> list[Any] | None:
+    """The method's resolved options on the family's tasks its trials ran (``None``: a task
+    the track no longer has; the whole space is described)."""
+    from abco_train.config.fields import ConfigError
+    from abco_train.tune.space import resolved_options
+
+    tasks = list(dict.fromkeys(key.rpartition("/seed")[0] for r in rows
+                               if (r.method, r.family) == (method, family) for key in r.runs))
+    try:
+        return resolved_options(track, method, tasks)
+    except (ConfigError, KeyError, ValueError):
+        return None
 
 
 def _settings(params: Mapping[str, Any]) -> str:

@@ -22,7 +22,13 @@ from abco_train.bench.tasks import Track
 from abco_train.config.fields import ConfigError
 from abco_train.config.run import env_kind
 from abco_train.tune.record import journal, write_record
-from abco_train.tune.space import FAMILIES, method_space, split_params, suggest
+from abco_train.tune.space import (
+    FAMILIES,
+    method_space,
+    resolved_options,
+    split_params,
+    suggest,
+)
 
 __all__ = ["TuneSpec", "SAMPLER_SEED", "STARTUP_TRIALS", "BENCHMARK_TRIALS",
            "family_tasks", "tune", "trial_runs"]  # fmt: skip
@@ -49,6 +55,8 @@ class TuneSpec:
     threads: int | None = None
     quiet: bool = False
     plugins: tuple[str, ...] = ()
+    #: Some of the track's validation seeds (``None``: all of them).
+    seeds: tuple[int, ...] | None = None
 
 
 def family_tasks(track: Track, family: str) -> list[str]:
@@ -83,7 +91,7 @@ def tune(spec: TuneSpec) -> dict[str, Any]:
         raise ConfigError(f"track {spec.track.name} names no validation seeds to tune on")
     if spec.trials < 1:
         raise ConfigError("--trials must be at least 1")
-    seeds = parse_seeds(spec.track.validation_seeds)
+    seeds = _trial_seeds(spec)
     tasks = family_tasks(spec.track, spec.family)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     spec.out.mkdir(parents=True, exist_ok=True)
@@ -93,15 +101,52 @@ def tune(spec: TuneSpec) -> dict[str, Any]:
         study = optuna.create_study(study_name=f"{spec.family}/{method}", storage=storage,
                                     direction="maximize", load_if_exists=True)  # fmt: skip
         _requeue_unfinished(study)
+        _check_same_seeds(study, seeds)
+        # the settings some task of the family reads: an epoch count that every task's
+        # converged schedule ignores is not searched
+        space = method_space(method, resolved_options(spec.track, method, tasks))
         while (finished := _finished(study)) < spec.trials:
             study.sampler = optuna.samplers.TPESampler(
                 seed=SAMPLER_SEED + len(study.trials), n_startup_trials=STARTUP_TRIALS + 1)
-            _run_trial(study, spec, method, tasks, seeds, finished)
+            _run_trial(study, spec, method, tasks, seeds, finished, space)
             write_record(spec.out, spec.track)
         best = study.best_trial
         done[method] = {"trials": _finished(study), "best": best.value, "best_trial": best.number}
     write_record(spec.out, spec.track)
     return done
+
+
+def _trial_seeds(spec: TuneSpec) -> list[int]:
+    """The validation seeds every trial runs: ``spec.seeds``, all of them some of the
+    track's, or the track's.
+
+    Raises:
+        ConfigError: A seed that is not one of the track's validation seeds.
+    """
+    validation = parse_seeds(spec.track.validation_seeds)
+    if spec.seeds is None:
+        return validation
+    other = sorted(set(spec.seeds) - set(validation))
+    if other:
+        raise ConfigError(f"--seeds {', '.join(map(str, other))}: not among track "
+                          f"{spec.track.name}'s validation seeds "
+                          f"({spec.track.validation_seeds}); a tuning runs on those only")
+    return sorted(set(spec.seeds))
+
+
+def _check_same_seeds(study: Any, seeds: list[int]) -> None:
+    """A study's trials all run on the same seeds: a resume with others would compare trials
+    scored on different runs.
+
+    Raises:
+        ConfigError: A finished trial of the study ran on other seeds.
+    """
+    for trial in study.trials:
+        ran = trial.user_attrs.get("seeds")
+        if ran is not None and list(ran) != seeds:
+            raise ConfigError(f"study {study.study_name} ran its trials on seeds "
+                              f"{', '.join(map(str, ran))}; --seeds must name the same "
+                              f"(got {', '.join(map(str, seeds))})")  # fmt: skip
 
 
 def _finished(study: Any) -> int:
@@ -124,14 +169,14 @@ def _requeue_unfinished(study: Any) -> None:
 
 
 def _run_trial(study: Any, spec: TuneSpec, method: str, tasks: list[str], seeds: list[int],
-               finished: int) -> None:  # fmt: skip
+               finished: int, space: dict[str, Any]) -> None:  # fmt: skip
     from optuna.trial import TrialState
 
     trial = study.ask()
     folder = trial.user_attrs.get("folder") or f"trial{trial.number:03d}"
     trial.set_user_attr("folder", folder)
     try:
-        params = {} if trial.user_attrs.get("defaults") else suggest(trial, method_space(method))
+        params = {} if trial.user_attrs.get("defaults") else suggest(trial, space)
         t0 = time.perf_counter()
         out = spec.out / spec.family / method / folder
         failures = _run_cells(spec, method, tasks, seeds, params, out)

@@ -58,8 +58,42 @@ def test_search_ranges_lie_inside_the_options_bounds(method: str) -> None:
 
 
 def test_bc_searches_no_idm_option() -> None:
-    assert sorted(method_space("bc")) == ["lr", "policy_epochs"]
+    assert sorted(method_space("bc")) == ["lr", "patience_checks", "policy_epochs"]
     assert "idm_epochs" in method_space("abco")
+
+
+@pytest.mark.parametrize(("method", "resolved", "searched"), [
+    ("bco", [{"schedule": "converged"}], {"lr", "patience_checks"}),
+    ("bco", [{"schedule": "converged"}, {"schedule": "epochs"}],  # one task reads the epochs
+     {"lr", "patience_checks", "idm_epochs", "idm_patience", "policy_epochs"}),
+    ("ilpo", [{"schedule": "converged", "policy_steps": None}],
+     {"lr", "patience_checks", "exp_weight", "relax", "remap"}),
+    ("ilpo", [{"schedule": "steps", "policy_steps": 1000}],  # G, then pi: no joint weight
+     {"lr", "train_steps", "relax", "remap"}),
+    ("dilo", [{"schedule": "steps"}], {"lr", "lam", "temperature"}),
+])
+def test_a_family_searches_only_what_its_tasks_read(method, resolved, searched) -> None:
+    assert set(method_space(method, resolved)) == searched
+
+
+def test_the_headline_families_search_what_their_runs_read() -> None:
+    from abco_train.bench.tasks import load_track
+    from abco_train.tune.space import resolved_options
+    from abco_train.tune.study import family_tasks
+
+    track = load_track("headline")
+
+    def space(method: str, family: str) -> set[str]:
+        return set(method_space(method, resolved_options(track, method,
+                                                         family_tasks(track, family))))
+
+    # classic: ILPO and LAPO converge on every task; MountainCar's authors' regime keeps the
+    # BCO family's epochs; mazes: ILPO trains G, then pi, and LAPO keeps its step counts
+    assert "train_steps" not in space("ilpo", "classic")
+    assert "patience_checks" in space("lapo", "classic")
+    assert {"idm_epochs", "patience_checks"} <= space("abco", "classic")
+    assert "exp_weight" not in space("ilpo", "maze") and "train_steps" in space("ilpo", "maze")
+    assert "patience_checks" not in space("lapo", "maze")
 
 
 def _tune(tmp_path: Path, trials: int, *extra: str) -> Path:
@@ -81,8 +115,9 @@ def test_every_method_gets_the_same_trials_and_a_resume_adds_only_new_ones(tmp_p
     for method, mine in by_method.items():
         assert mine[0].defaults and mine[0].params == {}  # trial 0: the defaults
         space = method_space(method)
-        for row in mine[1:]:
-            assert set(row.params) == set(space) and not row.defaults
+        for row in mine[1:]:  # CartPole converges: the epoch counts, which it never reads,
+            assert set(row.params) == {"lr", "patience_checks"}  # are not searched
+            assert not row.defaults
             for name, value in row.params.items():
                 search, _ = space[name]
                 assert search.low <= value <= search.high, (name, value)
@@ -147,6 +182,8 @@ def test_report_shows_the_tuning_effort_and_flags_what_a_reviewer_would(tmp_path
     (["--family", "maze"], "track tiny has no maze task"),
     (["--family", "classic", "--methods", "bco"], None),  # a track without validation seeds
     (["--family", "classic", "--methods", "nope"], "nope"),
+    (["--family", "classic", "--seeds", "100,1000"],  # a test seed
+     "--seeds 1000: not among track tiny's validation seeds"),
 ])  # fmt: skip
 def test_tune_refusals_are_one_line(tmp_path: Path, capsys, argv, message) -> None:
     track = tmp_path / "track.toml"
@@ -157,6 +194,24 @@ def test_tune_refusals_are_one_line(tmp_path: Path, capsys, argv, message) -> No
     assert main(["tune", "--track", str(track), "--out", str(tmp_path / "t"), *argv]) == 2
     one_error_line(capsys.readouterr().err, message)
     assert not (tmp_path / "t" / "trials.jsonl").exists()
+
+
+def test_a_study_keeps_its_seeds(tmp_path: Path, capsys) -> None:
+    """``--seeds`` picks some validation seeds for every trial; a resume on others would score
+    trials on different runs, and is refused before any runs."""
+    track = tmp_path / "track.toml"
+    track.write_text(TRACK.replace('validation_seeds = "100"', 'validation_seeds = "100-101"'))
+    out = tmp_path / "t"
+    argv = ["tune", "--track", str(track), "--family", "classic", "--methods", "bc", "--out",
+            str(out), "--jobs", "1", "--quiet", "--trials", "1"]  # fmt: skip
+    assert main([*argv, "--seeds", "101"]) == 0
+    rows, _ = read_trials(out / "trials.jsonl")
+    assert [(r.seeds, list(r.runs)) for r in rows] == [([101], ["cp/seed101"])]
+    before = (out / "trials.jsonl").read_bytes()
+    assert main([*argv[:-1], "2"]) == 2  # all the validation seeds: 100 and 101
+    one_error_line(capsys.readouterr().err, "ran its trials on seeds 101")
+    assert (out / "trials.jsonl").read_bytes() == before
+    assert not (out / "classic" / "bc" / "trial001").exists()
 
 
 def _choices(tmp_path: Path, **changes) -> Path:

@@ -63,6 +63,10 @@ VARIANTS: dict[str, dict[str, Any]] = {
 }
 
 
+#: The epoch counts are read by the epochs schedule only (a converged fit ends on its own).
+EPOCHS = (("schedule", "epochs"),)
+
+
 @dataclass
 class BCOOptions(MethodOptions):
     """The IDM's and the policy's schedule of the BCO family; ``None``: the run's default."""
@@ -71,10 +75,12 @@ class BCOOptions(MethodOptions):
                                    "and s' - s) or pair (each frame encoded apart; images "
                                    "only)", choices=IDM_INPUTS)  # fmt: skip
     idm_epochs: int | None = option("at most this many IDM epochs over I_s per iteration",
-                                    min=1, max=MAX_EPOCHS, search=Search(2, 40, log=True))
+                                    min=1, max=MAX_EPOCHS,
+                                    search=Search(2, 40, log=True, read_when=EPOCHS))
     idm_patience: int | None = option("stop the IDM's epochs after this many without a better "
                                       "validation accuracy (the best weights are kept)",
-                                      min=1, max=MAX_EPOCHS, search=Search(1, 8))
+                                      min=1, max=MAX_EPOCHS,
+                                      search=Search(1, 8, read_when=EPOCHS))
     idm_reinit: bool = option("re-initialise an IDM found at chance after training and train "
                               "it once more (off: Algorithm 1 never re-initialises; the run "
                               "goes on either way)", False)
@@ -84,7 +90,8 @@ class BCOOptions(MethodOptions):
     idm_samples: int | None = option("cap on N = |I_s| (default: |I_pre|)",
                                      min=1, max=MAX_PRE_TRANSITIONS)
     policy_epochs: int | None = option("policy epochs over the expert data per iteration",
-                                       min=1, max=MAX_EPOCHS, search=Search(1, 16, log=True))
+                                       min=1, max=MAX_EPOCHS,
+                                       search=Search(1, 16, log=True, read_when=EPOCHS))
     first_epochs_factor: int | None = option("iteration 0 trains both nets this many times "
                                              "longer", min=1, max=MAX_EPOCHS)  # fmt: skip
     min_updates: int | None = option("raise --policy-epochs and --idm-epochs on small data "

@@ -147,6 +147,12 @@ class ILPO(LatentTraining, Method):
     Options = ILPOOptions
     options: ILPOOptions
 
+    @classmethod
+    def defaults(cls, name: str) -> Mapping[str, Any]:
+        """No self-attention: ILPO's networks have none (its paper's are plain), so its record
+        says so rather than the run-wide default."""
+        return {"attention": False}
+
     def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
         super().__init__(config, data, rng)
         opts = self.options

@@ -56,8 +56,9 @@ class ILPOOptions(MethodOptions):
     latents: int | None = option("k, the number of latent actions (default: the env's number "
                                  "of actions)", min=2, max=MAX_LATENTS)  # fmt: skip
     train_steps: int = option("Adam steps of G and pi on the expert pairs in iteration 0",
-                              min=0, max=MAX_STEPS, search=Search(500, 6000, log=True)
-                              )  # fmt: skip
+                              min=0, max=MAX_STEPS,
+                              search=Search(500, 6000, log=True,
+                                            read_when=(("schedule", "steps"),)))  # fmt: skip
     policy_steps: int | None = option("train G alone for --ilpo-train-steps steps, then pi alone "
                                       "for this many steps against the fixed G; null: train "
                                       "them together (default: 1000 on mazes, null on classic "
@@ -76,8 +77,8 @@ class ILPOOptions(MethodOptions):
                                 "sees the maze's cells where every method does",
                                 choices=TARGETS)  # fmt: skip
     exp_weight: float = option("fraction of L_exp's gradient that reaches G (joint schedule "
-                               "only)", min=0.0, max=1.0, search=Search(0.0, 1.0)
-                               )  # fmt: skip
+                               "only)", min=0.0, max=1.0,
+                               search=Search(0.0, 1.0, read_when=(("policy_steps", None),)))
     relax: float = option("relaxed winner-takes-all: L_min plus relax * mean_z ||.||^2",
                           min=0.0, max=1.0, search=Search(0.01, 0.5, log=True))  # fmt: skip
     latent_init: str = option("latent embeddings start random, or shared (one embedding plus "
