@@ -199,7 +199,8 @@ def _bench_plan(args: argparse.Namespace) -> tuple[Any, list[Any]]:
         raise ConfigError(f"track {track.name} names no {args.seeds} seeds; give them")
     methods = parse_list(args.methods) if args.methods else list(track.methods)
     tasks = parse_list(args.tasks) if args.tasks and args.budget_multiples is None else []
-    return track, plan_track(track, tasks, methods, parse_seeds(text))
+    own = track.own_test_seeds() if args.seeds == "test" else None  # tasks' own test seeds
+    return track, plan_track(track, tasks, methods, parse_seeds(text), own)
 
 
 def _bench_options(parser: argparse.ArgumentParser) -> None:

@@ -175,8 +175,11 @@ def plan(envs: Sequence[str], methods: Sequence[str], seeds: Sequence[int],
 
 
 def plan_track(track: Track, tasks: Sequence[str], methods: Sequence[str],
-               seeds: Sequence[int]) -> list[Cell]:  # fmt: skip
-    """Every (task, method, seed) cell of ``track``, task-major (``tasks``: all when empty).
+               seeds: Sequence[int], own: Mapping[str, Sequence[int]] | None = None
+               ) -> list[Cell]:  # fmt: skip
+    """Every (task, method, seed) cell of ``track``, task-major (``tasks``: all when empty);
+    a task named in ``own`` runs its seeds there instead of ``seeds`` (its own test seeds:
+    :meth:`~abco_train.bench.tasks.Track.own_test_seeds`).
 
     Raises:
         ConfigError: An unknown task, no method or seed, a bad name, too many cells.
@@ -190,11 +193,12 @@ def plan_track(track: Track, tasks: Sequence[str], methods: Sequence[str],
             check_name(name, "method")
         except RecordError as exc:
             raise ConfigError(f"--methods: {exc}") from None
-    n = len(chosen) * len(methods) * len(seeds)
+    seeds_of = {t.name: list((own or {}).get(t.name, seeds)) for t in chosen}
+    n = len(methods) * sum(len(s) for s in seeds_of.values())
     if n > MAX_CELLS:
         raise ConfigError(f"{n:,} cells; a grid holds at most {MAX_CELLS:,}")
     return [Cell(t.env, m, int(s), t.settings.get("layouts"), t.name)
-            for t in chosen for m in methods for s in seeds]  # fmt: skip
+            for t in chosen for m in methods for s in seeds_of[t.name]]  # fmt: skip
 
 
 def cell_config(

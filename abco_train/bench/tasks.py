@@ -14,6 +14,7 @@ A track is a TOML file (the built-in ones live in ``abco_train/bench/tracks/``; 
     name = "cartpole-authors-data"
     env = "CartPole-v1"
     budget = 20000                  # environment interactions of a run, all kinds summed
+    test_seeds = "1000-1004"        # optional: the task's own, instead of the track's
     headline = "episodes"           # the final-evaluation block the task ranks by
     measures = "what the task measures"
     basis = "the paper's or peer's setting that justifies it"
@@ -69,7 +70,7 @@ _PER_CELL = ("env", "method", "seed", "run_dir", "quiet", "threads", "task", "bu
              "headline", "held_out", "method_options")  # fmt: skip
 _TRACK_KEYS = {"name", "description", "methods", "validation_seeds", "test_seeds"}
 _TASK_KEYS = {"name", "env", "budget", "headline", "measures", "basis", "settings",
-              "method_settings", "method_options"}  # fmt: skip
+              "method_settings", "method_options", "test_seeds"}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -87,6 +88,8 @@ class Task:
         method_settings: Run-config fields of single methods' runs (on top of ``settings``),
             by method name: e.g. a learning rate chosen for one method.
         method_options: Options of single methods on this task, by method name.
+        test_seeds: The task's own test seeds, instead of the track's (``""``: the track's):
+            fewer where a task's runs cost more, more where its scores spread wider.
     """
 
     name: str
@@ -98,6 +101,7 @@ class Task:
     settings: Mapping[str, Any] = field(default_factory=dict)
     method_settings: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     method_options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    test_seeds: str = ""
 
     def config(self, method: str | None = None, validation: bool = False) -> dict[str, Any]:
         """The run-config fields of a run of this task (``method``'s options included);
@@ -136,6 +140,19 @@ class Track:
                 return task
         raise ConfigError(f"track {self.name!r} has no task {escape(name, 60)!r}; its tasks: "
                           f"{', '.join(t.name for t in self.tasks)}")  # fmt: skip
+
+    def own_test_seeds(self) -> dict[str, list[int]]:
+        """``task -> its test seeds``, for the tasks whose own differ from the track's."""
+        from abco_train.bench.cells import parse_seeds
+
+        return {t.name: parse_seeds(t.test_seeds) for t in self.tasks if t.test_seeds}
+
+    def all_test_seeds(self) -> list[int]:
+        """Every seed some task is tested on: the track's and the tasks' own."""
+        from abco_train.bench.cells import parse_seeds
+
+        seeds = set(parse_seeds(self.test_seeds)) if self.test_seeds else set()
+        return sorted(seeds.union(*self.own_test_seeds().values()))
 
 
 def load_track(name_or_path: str | os.PathLike[str]) -> Track:
@@ -209,13 +226,26 @@ def _track(data: Any) -> Track:
         if methods and strays:
             raise ValueError(f"task {task.name!r} sets options of {', '.join(strays)}, not a "
                              f"method of the track ({', '.join(methods)})")  # fmt: skip
-    return Track(
+    track = Track(
         name=check_name(head.get("name", "track"), "track name"), tasks=built,
         description=_text(head.get("description", ""), "[track] description", 20_000),
         methods=tuple(check_name(m, "method name") for m in methods),
         validation_seeds=_text(head.get("validation_seeds", ""), "validation_seeds", 200),
         test_seeds=_text(head.get("test_seeds", ""), "test_seeds", 200),
     )  # fmt: skip
+    _check_apart(track)
+    return track
+
+
+def _check_apart(track: Track) -> None:
+    """No seed is both a validation seed (choices are made on it) and a test seed."""
+    from abco_train.bench.cells import parse_seeds
+
+    validation = set(parse_seeds(track.validation_seeds)) if track.validation_seeds else set()
+    both = sorted(validation & set(track.all_test_seeds()))
+    if both:
+        raise ValueError(f"seed(s) {', '.join(map(str, both[:5]))} are both validation and "
+                         "test seeds; choices made on a seed cannot be tested on it")
 
 
 def _task(table: Any, index: int) -> Task:
@@ -237,14 +267,21 @@ def _task(table: Any, index: int) -> Task:
         raise ValueError(f"task {name!r} method_settings is not a table of tables")
     per_method = {check_name(m, "method name"): _known(v, settings_keys, f"task {name!r} "
                   f"method_settings.{m}") for m, v in per_method.items()}  # fmt: skip
-    headline = t.get("headline")
+    headline, test_seeds = t.get("headline"), _text(t.get("test_seeds", ""), "test_seeds", 200)
+    if test_seeds:  # checked where the track is read, not when its grid runs
+        from abco_train.bench.cells import parse_seeds
+
+        try:
+            parse_seeds(test_seeds)
+        except ConfigError as exc:
+            raise ValueError(f"task {name!r} test_seeds: {exc}") from None
     task = Task(name=name, env=_text(t.get("env"), f"task {name!r} env", 200), budget=budget,
                 headline=None if headline is None else _text(headline, "headline", 100),
                 measures=_text(t.get("measures", ""), "measures"),
                 basis=_text(t.get("basis", ""), "basis"), settings=dict(settings),
                 method_settings={m: dict(v) for m, v in per_method.items()},
                 method_options={check_name(m, "method name"): dict(o)
-                                for m, o in options.items()})  # fmt: skip
+                                for m, o in options.items()}, test_seeds=test_seeds)  # fmt: skip
     RunConfig(**task.config()).validate()  # the env, the settings' types and bounds, headline
     for method in task.method_settings:
         RunConfig(**{**task.config(method), "method_options": {}}).validate()

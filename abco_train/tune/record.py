@@ -17,7 +17,6 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from abco_train.bench.cells import parse_seeds
 from abco_train.bench.records import escape
 from abco_train.bench.tasks import Track
 
@@ -67,7 +66,7 @@ def trial_rows(out: Path, track: Track) -> list[TrialRow]:
     from optuna.trial import TrialState
 
     storage = journal(out)
-    tests = parse_seeds(track.test_seeds) if track.test_seeds else []
+    tests = track.all_test_seeds()
     rows = []
     for name in sorted(optuna.get_all_study_names(storage)):
         family, _, method = name.partition("/")

@@ -14,6 +14,7 @@ import pytest
 import abco_envs
 from abco_train.bench.cells import cell_config, plan_track
 from abco_train.bench.tasks import MAX_TRACK_BYTES, load_track
+from abco_train.cli import _bench_plan, build_parser
 from abco_train.config.run import ConfigError, RunConfig
 
 IFO = ("bco", "bco-alpha", "bco-alpha-torabi", "abco", "iupe", "ilpo", "gaifo")
@@ -84,6 +85,10 @@ budget = 100
      "sets options of bcoo, not a method of the track"),
     ("budget = 100", "budget = 100\nmethod_options = { abco = { idm_epochs = 1 } }",
      "sets options of abco, not a method of the track"),
+    ("budget = 100", "budget = 100\ntest_seeds = '5-2'", "task 'cp' test_seeds: "),
+    ("budget = 100", "budget = 100\ntest_seeds = '99-100'", "100 are both validation and test"),
+    ('validation_seeds = "100"', 'validation_seeds = "100"\ntest_seeds = "100-109"',
+     "100 are both validation and test"),
 ])  # fmt: skip
 def test_track_file_refusals(tmp_path, old, new, message):
     path = _write(tmp_path, GOOD.replace(old, new, 1))
@@ -119,6 +124,28 @@ idm_epochs = 3
         cell_config(cells[0], tmp_path, {"budget": 5}, track=track)
     with pytest.raises(ConfigError, match="no task 'other'"):
         plan_track(track, ["other"], ["bco"], [0])
+
+
+def test_a_task_may_have_test_seeds_of_its_own(tmp_path):
+    """A costly task tests on fewer seeds than the track's (``--seeds test``); every other
+    seed list (validation, given) is the same for every task."""
+    path = _write(tmp_path, GOOD.replace('validation_seeds = "100"',
+                                         'validation_seeds = "100"\ntest_seeds = "2000-2003"')
+                  + '[[task]]\nname = "maze"\nenv = "AbcoMaze3x3-v0"\nbudget = 100\n'
+                  'test_seeds = "2000-2001"\n')  # fmt: skip
+    track = load_track(path)
+    assert track.own_test_seeds() == {"maze": [2000, 2001]}
+    assert track.all_test_seeds() == [2000, 2001, 2002, 2003]
+
+    def keys(seeds: str) -> list[str]:
+        args = build_parser().parse_args(["bench", "--track", path, "--out", "o",
+                                          "--methods", "bco", "--seeds", seeds])  # fmt: skip
+        return [cell.key for cell in _bench_plan(args)[1]]
+
+    assert keys("test") == [*(f"cp/bco/seed{s}" for s in range(2000, 2004)),
+                            "maze/bco/seed2000", "maze/bco/seed2001"]  # fmt: skip
+    assert keys("validation") == ["cp/bco/seed100", "maze/bco/seed100"]
+    assert keys("7") == ["cp/bco/seed7", "maze/bco/seed7"]
 
 
 def test_method_settings_apply_to_their_method_only(tmp_path):
