@@ -2,10 +2,8 @@
 apart.
 
 Each IfO method (:data:`~abco_train.report.headline.IFO_METHODS`) with scored
-runs on every task enters as a (runs x tasks) matrix of its runs' headline scores (a method
-with unequal runs across tasks keeps its ``n`` lowest-numbered seeds on every task, ``n`` its
-fewest on any; :func:`abco_train.report.aggregates.score_matrices`). With ``rliable``
-(``pip install "abco[stats]"``), as the paper track's aggregates:
+runs on every task enters as a (runs x tasks) matrix of its runs' headline scores. With
+``rliable`` (``pip install "abco[stats]"``), as the paper track's aggregates:
 
 * IQM, mean and optimality gap (``rliable.metrics.aggregate_iqm`` / ``aggregate_mean`` /
   ``aggregate_optimality_gap``, gamma 1: the expert) with 95% stratified bootstrap intervals
@@ -16,6 +14,12 @@ fewest on any; :func:`abco_train.report.aggregates.score_matrices`). With ``rlia
   ``worse`` when below, ``equivalent`` when it lies inside ``[0.40, 0.60]``
   (:data:`EQUIVALENCE`: neither is ahead by more than a tenth of the chance), else
   ``undecided`` (more seeds would tell).
+
+Where a method has more runs on some tasks than on others (a track whose costly tasks test
+on fewer seeds), every run is kept and every task weighs the same
+(:mod:`abco_train.report.balanced`: the same statistics, each run weighted by one over its
+task's runs, intervals by scipy's bootstrap of each task's runs on their own); no run is
+dropped to make a matrix rectangular.
 
 Scores below a random policy's (below 0) enter every aggregate and every pair at 0
 (:data:`SCORE_FLOOR`): no imitation is no imitation, however far below random the returns
@@ -43,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from abco_train.report import aggregates
+from abco_train.report import aggregates, balanced
 from abco_train.report.headline import IFO_METHODS
 from abco_train.report.headline_plots import AGGREGATES_PNG, Interval, plot_aggregates
 
@@ -107,6 +111,11 @@ class Ranking:
     taus: np.ndarray = field(default_factory=lambda: np.zeros(0))
     pairs: dict[tuple[str, str], Interval] = field(default_factory=dict)
     floored: dict[str, dict[str, int]] = field(default_factory=dict)  # method -> task -> runs
+    #: Runs per task of each method aggregated (both estimators).
+    runs: dict[str, list[int]] = field(default_factory=dict)
+    #: Whether the runs per task differed, so that every task was weighed the same
+    #: (:mod:`abco_train.report.balanced`).
+    balanced: bool = False
 
 
 def compute(scores: Scores, tasks: Sequence[str], rl: SimpleNamespace, reps: int | None = None
@@ -116,11 +125,15 @@ def compute(scores: Scores, tasks: Sequence[str], rl: SimpleNamespace, reps: int
     each bootstrap seeded (numpy seed 0)."""
     reps = int(reps or aggregates.REPS)
     ifo = {m: scores[m] for m in IFO_METHODS if m in scores}
+    if any(len({len(by_task.get(t, {})) for t in tasks}) > 1 and all(map(by_task.get, tasks))
+           for by_task in ifo.values()):  # fmt: skip
+        return _balanced(ifo, tasks, reps)
     matrices, dropped, left_out = aggregates.score_matrices(ifo, tasks)
     floored = {m: {t: int(n) for t, n in zip(tasks, (x < SCORE_FLOOR).sum(0)) if n}
                for m, x in matrices.items()}  # fmt: skip
     matrices = {m: np.maximum(x, SCORE_FLOOR) for m, x in matrices.items()}
-    out = Ranking(matrices, dropped, left_out, floored={m: f for m, f in floored.items() if f})
+    out = Ranking(matrices, dropped, left_out, floored={m: f for m, f in floored.items() if f},
+                  runs={m: [x.shape[0]] * len(tasks) for m, x in matrices.items()})
     if not matrices:
         return out
     metrics = rl.metrics
@@ -150,6 +163,45 @@ def compute(scores: Scores, tasks: Sequence[str], rl: SimpleNamespace, reps: int
     return out
 
 
+def _balanced(ifo: Scores, tasks: Sequence[str], reps: int) -> Ranking:
+    """:func:`compute` keeping every run, each task weighing the same (the module docstring)."""
+    columns: dict[str, list[np.ndarray]] = {}
+    left_out: dict[str, list[str]] = {}
+    for m, by_task in ifo.items():
+        lacking = [t for t in tasks if not by_task.get(t)]
+        if lacking:
+            left_out[m] = lacking
+            continue
+        columns[m] = [np.array([by_task[t][s] for s in sorted(by_task[t])], dtype=np.float64)
+                      for t in tasks]  # fmt: skip
+    floored = {m: {t: int((c < SCORE_FLOOR).sum()) for t, c in zip(tasks, cols)
+                   if (c < SCORE_FLOOR).any()} for m, cols in columns.items()}  # fmt: skip
+    columns = {m: [np.maximum(c, SCORE_FLOOR) for c in cols] for m, cols in columns.items()}
+    out = Ranking({}, {m: 0 for m in columns}, left_out, balanced=True,
+                  floored={m: f for m, f in floored.items() if f},
+                  runs={m: [len(c) for c in cols] for m, cols in columns.items()})  # fmt: skip
+    for m, cols in columns.items():
+        def stats(*c: np.ndarray) -> np.ndarray:
+            return np.array([balanced.iqm(c), balanced.optimality_gap(c), balanced.mean(c)])
+
+        point, (low, high) = stats(*cols), balanced.interval(stats, cols, reps, aggregates.SEED)
+        out.iqm[m], out.gap[m], out.mean[m] = (
+            (float(point[k]), float(low[k]), float(high[k])) for k in range(3))
+    out.taus = aggregates.profile_taus({m: np.concatenate(c) for m, c in columns.items()})
+    for m, cols in columns.items():
+        out.profiles[m] = balanced.profile(cols, out.taus)
+        out.profile_cis[m] = np.stack(balanced.interval(
+            lambda *c: balanced.profile(c, out.taus), cols, reps, aggregates.SEED))
+    n = len(tasks)
+    for x, y in itertools.combinations(list(columns), 2):
+        p = balanced.probability_of_improvement(columns[x], columns[y])
+        low, high = balanced.interval(
+            lambda *c: np.array([balanced.probability_of_improvement(c[:n], c[n:])]),
+            [*columns[x], *columns[y]], reps, aggregates.SEED)  # fmt: skip
+        out.pairs[(x, y)] = (p, float(low[0]), float(high[0]))
+    return out
+
+
 def _fmt(x: Interval) -> str:
     return f"{x[0]:.3f} [{x[1]:.3f}, {x[2]:.3f}]"
 
@@ -171,10 +223,12 @@ def section(scores: Scores, tasks: Sequence[str], out: Path, labels: Mapping[str
     pair_head = ["## Pairwise: which IfO methods the benchmark tells apart", ""]
     lines = [f"Each IfO method ({', '.join(IFO_METHODS)}) with scored runs on every task enters"
              f" as a (runs x {n} tasks) matrix of headline scores; BC, the references and any"
-             " other method do not. A method with unequal runs across tasks keeps its n"
-             " lowest-numbered seeds on every task (n: its fewest on any). Intervals: 95%"
-             f" stratified bootstrap ({int(reps or aggregates.REPS):,} replicates, runs resampled"
-             " within each task, numpy seed 0) by `rliable`. A score below a random policy's"
+             " other method do not. Intervals: 95% stratified bootstrap"
+             f" ({int(reps or aggregates.REPS):,} replicates, runs resampled within each task,"
+             " seed 0) by `rliable`; where a method has more runs on some tasks than on others,"
+             " every run is kept and every task weighs the same (a run weighs one over its"
+             " task's runs; the same statistics, intervals by `scipy.stats.bootstrap` of each"
+             " task's runs on their own). A score below a random policy's"
              f" enters at {SCORE_FLOOR:g}: doing worse than random is no more imitation than"
              " random (only LunarLander's returns are unbounded below); the task tables keep"
              " it as it is.", ""]  # fmt: skip
@@ -191,7 +245,7 @@ def section(scores: Scores, tasks: Sequence[str], out: Path, labels: Mapping[str
     ranking = compute(scores, tasks, rl, reps)
     for m, lacking in ranking.left_out.items():
         lines.append(f"- left out: {m} (no scored run on {', '.join(lacking)})")
-    if not ranking.matrices:
+    if not ranking.runs:
         return [*head, *lines, "", "No IfO method has scored runs on every task.", "",
                 *pair_head, "Nothing to compare."], {}  # fmt: skip
     for m, tasks_lifted in ranking.floored.items():
@@ -215,14 +269,15 @@ def _aggregate_table(ranking: Ranking, labels: Mapping[str, str], n: int,
     """The methods by IQM (best first): IQM, mean and optimality gap with their intervals."""
     lines = ["", "| Rank | Method | Runs per task | IQM of score [95% CI] | Mean [95% CI] |"
              " Optimality gap [95% CI] |", "|---|---|---|---|---|---|"]  # fmt: skip
-    order = sorted(ranking.matrices, key=lambda m: -ranking.iqm[m][0])
+    order = sorted(ranking.runs, key=lambda m: -ranking.iqm[m][0])
     for rank, m in enumerate(order, 1):
-        x = ranking.matrices[m]
-        runs = str(x.shape[0]) + (f" ({ranking.dropped[m]} dropped)" if ranking.dropped[m] else "")
+        fewest, most = min(ranking.runs[m]), max(ranking.runs[m])
+        runs = str(most) if fewest == most else f"{fewest}-{most}"
+        runs += f" ({ranking.dropped[m]} dropped)" if ranking.dropped[m] else ""
         lines.append(f"| {rank} | {labels.get(m, m)} | {runs} | {_fmt(ranking.iqm[m])} |"
                      f" {_fmt(ranking.mean[m])} | {_fmt(ranking.gap[m])} |")  # fmt: skip
         base = {"table": "headline-aggregate", "env": f"all {n} tasks", "method": m,
-                "evaluation": "headline", "seeds": x.shape[0], "paper": ""}  # fmt: skip
+                "evaluation": "headline", "seeds": fewest, "paper": ""}  # fmt: skip
         mean, iqm, gap = ranking.mean[m], ranking.iqm[m], ranking.gap[m]
         csv_rows.append({**base, "metric": "score", "mean": mean[0], "ci_low": mean[1],
                          "ci_high": mean[2], "iqm": iqm[0], "iqm_ci_low": iqm[1],
@@ -256,7 +311,7 @@ def _pair_lines(ranking: Ranking, labels: Mapping[str, str], n: int,
         lines.append(f"| {labels.get(x, x)} | {labels.get(y, y)} | {_fmt(p)} | {judged} |")
         csv_rows.append({"table": "pairwise", "env": f"all {n} tasks", "method": x,
                          "evaluation": "headline", "metric": f"probability_of_improvement_over_{y}",
-                         "seeds": ranking.matrices[x].shape[0], "mean": p[0], "ci_low": p[1],
+                         "seeds": min(ranking.runs[x]), "mean": p[0], "ci_low": p[1],
                          "ci_high": p[2], "paper": ""})  # fmt: skip
     lines += ["", "Per method (`name`: P(it beats the other)):", ""]
     for m, (ahead, behind, even, open_) in standings(ranking.pairs).items():
