@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from abco_train.bench.ranges import parse_seeds
 from abco_train.bench.records import RecordError, check_name, escape
 from abco_train.config.fields import ConfigError
 from abco_train.config.limits import MAX_BUDGET
@@ -143,14 +144,10 @@ class Track:
 
     def own_test_seeds(self) -> dict[str, list[int]]:
         """``task -> its test seeds``, for the tasks whose own differ from the track's."""
-        from abco_train.bench.cells import parse_seeds
-
         return {t.name: parse_seeds(t.test_seeds) for t in self.tasks if t.test_seeds}
 
     def all_test_seeds(self) -> list[int]:
         """Every seed some task is tested on: the track's and the tasks' own."""
-        from abco_train.bench.cells import parse_seeds
-
         seeds = set(parse_seeds(self.test_seeds)) if self.test_seeds else set()
         return sorted(seeds.union(*self.own_test_seeds().values()))
 
@@ -239,8 +236,6 @@ def _track(data: Any) -> Track:
 
 def _check_apart(track: Track) -> None:
     """No seed is both a validation seed (choices are made on it) and a test seed."""
-    from abco_train.bench.cells import parse_seeds
-
     validation = set(parse_seeds(track.validation_seeds)) if track.validation_seeds else set()
     both = sorted(validation & set(track.all_test_seeds()))
     if both:
@@ -269,8 +264,6 @@ def _task(table: Any, index: int) -> Task:
                   f"method_settings.{m}") for m, v in per_method.items()}  # fmt: skip
     headline, test_seeds = t.get("headline"), _text(t.get("test_seeds", ""), "test_seeds", 200)
     if test_seeds:  # checked where the track is read, not when its grid runs
-        from abco_train.bench.cells import parse_seeds
-
         try:
             parse_seeds(test_seeds)
         except ConfigError as exc:
