@@ -31,6 +31,7 @@ EXPECTED = {
     "bench_gpu.py": ["CUDA device:", "cpu arm: exit 0", "x cpu/auto",
                      "cartpole-authors-data       bc"],
     "bench_vector_update.py": ["transposed ms", "last-dim ms", "ratio", "medians of"],
+    "bench_pair_inputs.py": ["built once ms", "per pass ms", "ratio", "medians of"],
     "bench_train.py": ["env", "method", "result", "AbcoMaze3x3-v0     abco       P=",
                        "CartPole-v1        abco       P="],
 }

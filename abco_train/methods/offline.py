@@ -27,6 +27,7 @@ from abco_train.config.run import RunConfig
 from abco_train.harness.training_data import TrainingData
 from abco_train.methods.base import Method
 from abco_train.networks.builders import build_networks, data_statistics
+from abco_train.networks.heads import IDMNet
 
 __all__ = ["OfflineMethod", "OfflineData", "offline_data", "state_network",
            "transition_network", "iteration_steps", "triples"]  # fmt: skip
@@ -122,10 +123,11 @@ def state_network(config: RunConfig, data: TrainingData, stats: dict[str, Any], 
 
 
 def transition_network(config: RunConfig, data: TrainingData, stats: dict[str, Any],
-                       outputs: int) -> nn.Module:  # fmt: skip
+                       outputs: int) -> IDMNet:  # fmt: skip
     """The run's IDM network (``(s, s') -> outputs``)."""
     _, idm = build_networks(data.observation_space, outputs, _arch(config),
                             bool(config.attention), **stats)  # fmt: skip
+    assert isinstance(idm, IDMNet), "every builder's IDM is an IDMNet"
     return idm
 
 

@@ -66,10 +66,28 @@ class IDMNet(nn.Module):
 
     def forward(self, obs: torch.Tensor, next_obs: torch.Tensor) -> torch.Tensor:
         """Action logits for a batch of transitions."""
+        return self.from_input(self.pair_input(obs, next_obs))
+
+    def pair_input(self, obs: torch.Tensor, next_obs: torch.Tensor) -> torch.Tensor:
+        """What the network reads of a batch of transitions, built once for callers that
+        read the same transitions through several copies of the network (DILO's online and
+        target utilities): ``(s, s' - s)`` on the last dim (frames scaled to ``[0, 1]``
+        first), or with ``pair`` both batches one after the other. The inputs of two
+        batches, concatenated on dim 0, are the input of the two batches concatenated."""
+        if not self.concat_inputs:
+            return torch.cat([obs, next_obs], dim=0)
+        if obs.dtype != torch.uint8:
+            return torch.cat([obs, next_obs - obs], dim=-1)
+        # frames: a signed difference needs floats; written into one buffer, not concatenated
+        first = obs.float().div_(255.0)
+        out = torch.empty(*first.shape[:-1], 2, first.shape[-1], device=first.device)
+        out[..., 0, :] = first
+        torch.sub(next_obs.float().div_(255.0), first, out=out[..., 1, :])
+        return out.flatten(-2)
+
+    def from_input(self, x: torch.Tensor) -> torch.Tensor:
+        """Action logits of :meth:`pair_input`'s ``x``."""
         if self.concat_inputs:
-            if obs.dtype == torch.uint8:  # frames: a signed difference needs floats
-                obs, next_obs = obs.float().div_(255.0), next_obs.float().div_(255.0)
-            return self.head(self.encoder(torch.cat([obs, next_obs - obs], dim=-1)))
-        both = self.encoder(torch.cat([obs, next_obs], dim=0))
-        first, second = both.chunk(2, dim=0)
+            return self.head(self.encoder(x))
+        first, second = self.encoder(x).chunk(2, dim=0)
         return self.head(torch.cat([first, second], dim=1))

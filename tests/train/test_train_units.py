@@ -246,3 +246,23 @@ def test_other_datasets_make_another_run(tmp_path):
     assert finished_result(tmp_path, same) == final
     assert config_differences(tmp_path, held) == ["pre_data"]
     assert finished_result(tmp_path, held) is None
+
+
+@pytest.mark.parametrize(("space", "idm_input"), [
+    (spaces.Box(-1.0, 1.0, (6,)), "difference"),
+    (spaces.Box(0, 255, (12, 12, 3), dtype=np.uint8), "difference"),
+    (spaces.Box(0, 255, (12, 12, 3), dtype=np.uint8), "pair"),
+])  # fmt: skip
+def test_an_idm_reads_pair_inputs_built_once(space, idm_input) -> None:
+    """``from_input(pair_input(s, s'))`` is the forward pass to the bit, and two batches' inputs
+    concatenated are the concatenated batches' input: DILO builds them once for its online
+    and its target utility."""
+    torch.manual_seed(0)
+    _, idm = build_networks(space, 4, attention=False, idm_input=idm_input)
+    idm.eval()  # no dropout draws between the passes compared
+    s, s1, s2 = (torch.as_tensor(np.stack([space.sample() for _ in range(5)])) for _ in range(3))
+    with torch.no_grad():
+        assert torch.equal(idm.from_input(idm.pair_input(s, s1)), idm(s, s1))
+        both = torch.cat([idm.pair_input(s, s1), idm.pair_input(s1, s2)])
+        assert torch.equal(both, idm.pair_input(torch.cat([s, s1]), torch.cat([s1, s2])))
+        assert torch.equal(idm.from_input(both), idm(torch.cat([s, s1]), torch.cat([s1, s2])))

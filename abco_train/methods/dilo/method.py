@@ -179,11 +179,12 @@ class DILO(OfflineMethod):
         opts, params = self.options, list(self.value.parameters())
         s, s1, s2 = self._triples(self.pre_rows[pre_idx], self.expert_rows[expert_idx])
         n, n_pre = len(s), len(pre_idx)
-        now = self.value(s, s1)  # (n, 2): V(s, s'), twin heads; offline rows first
-        after = self.value(s1, s2)  # V(s', s'')
+        # both networks read the same two batches of pairs: built once (frames: once scaled)
+        pairs = (self.value.pair_input(s, s1), self.value.pair_input(s1, s2))
+        now = self.value.from_input(pairs[0])  # (n, 2): V(s, s'), twin heads; offline first
+        after = self.value.from_input(pairs[1])  # V(s', s'')
         with torch.no_grad():  # the smaller target head, for both online heads (TwinQ's min)
-            target = self.target(torch.cat([s, s1]), torch.cat([s1, s2])
-                                 ).min(1, keepdim=True).values  # fmt: skip
+            target = self.target.from_input(torch.cat(pairs)).min(1, keepdim=True).values
         forward_residual = opts.gamma * target[n:] - now
         backward_residual = opts.gamma * after - target[:n]
         forward = opts.lam * dual_loss(forward_residual[n_pre:], forward_residual[:n_pre],
