@@ -37,7 +37,7 @@ def section(tuned_by: str | Path, methods: Sequence[str]) -> list[str]:
     families = sorted({f for _, f in counts})
     lines = ["## Tuning effort", "",
              f"From `{escape(tuned_by, 200)}`: every finished trial per method and task "
-             "family (trial 0 is the method's defaults); a trial's value is its runs' mean "
+             "family (the first runs the method's defaults); a trial's value is its runs' mean "
              "headline score on the validation seeds.", "",
              "| Method | Family | Trials | Defaults | Best (trial) | Seeds |",
              "|---|---|---:|---:|---:|---|"]  # fmt: skip

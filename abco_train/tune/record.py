@@ -124,9 +124,10 @@ def _markdown(rows: list[TrialRow], track: Track) -> list[str]:
     lines = [f"# Tuning record: {escape(track.name, 80)}", "",
              f"Validation seeds {', '.join(map(str, seeds)) or 'none yet'} (maze runs on "
              "validation layouts). A trial's value is the mean headline score of its runs, a "
-             "failed run counting 0; trial 0 is the method's defaults; a tie keeps the earlier "
-             "trial.", "", "| Family | Method | Trials | Defaults | Best | Best trial | "
-             "Its settings |", "|---|---|---:|---:|---:|---:|---|"]  # fmt: skip
+             "failed run counting 0; the first trial runs the method's defaults (the next "
+             "where it was cut short and run again); a tie keeps the earlier trial.", "",
+             "| Family | Method | Trials | Defaults | Best | Best trial | Its settings |",
+             "|---|---|---:|---:|---:|---:|---|"]  # fmt: skip
     for (method, family), row in best.items():
         mine = [r for r in rows if r.method == method and r.family == family]
         default = next((f"{r.value:.3f}" for r in mine if r.defaults), "–")
