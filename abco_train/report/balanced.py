@@ -84,11 +84,31 @@ def probability_of_improvement(x: Columns, y: Columns) -> float:
 def interval(statistic: Callable[..., np.ndarray], samples: Sequence[np.ndarray], reps: int,
              seed: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """The 95% percentile-bootstrap interval ``(low, high)`` of the vector ``statistic`` of
-    ``samples``, each sample resampled on its own (``seed``: the bootstrap's generator)."""
+    ``samples``, each sample resampled on its own (``seed``: the bootstrap's generator). A
+    sample of one run resamples to itself: it is held fixed (scipy draws from samples of two
+    or more); with no other sample the interval is the point.
+
+    Example:
+        >>> low, high = interval(lambda a, b: np.array([mean([a, b])]),
+        ...                      [np.array([0.5]), np.array([0.0, 1.0])], reps=200, seed=0)
+        >>> float(low[0]), float(high[0])
+        (0.25, 0.75)
+    """
     from scipy.stats import bootstrap
 
-    result = bootstrap(tuple(np.asarray(s, dtype=np.float64) for s in samples),
-                       lambda *drawn: np.atleast_1d(statistic(*drawn)), n_resamples=reps,
+    data = [np.asarray(s, dtype=np.float64) for s in samples]
+    drawn_at = [i for i, s in enumerate(data) if len(s) > 1]
+    if not drawn_at:
+        point = np.atleast_1d(statistic(*data))
+        return point, point
+
+    def with_fixed(*drawn: np.ndarray) -> np.ndarray:
+        full = list(data)
+        for i, sample in zip(drawn_at, drawn):
+            full[i] = sample
+        return np.atleast_1d(statistic(*full))
+
+    result = bootstrap(tuple(data[i] for i in drawn_at), with_fixed, n_resamples=reps,
                        method="percentile", vectorized=False,
                        rng=np.random.default_rng(seed))  # fmt: skip
     interval = result.confidence_interval

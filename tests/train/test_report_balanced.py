@@ -54,3 +54,16 @@ def test_a_grid_with_fewer_seeds_on_some_tasks_keeps_every_run() -> None:
         assert ranked.profile_cis[m].shape == (2, len(ranked.taus))
     p, low, high = ranked.pairs[("bco", "abco")]
     assert p == 1.0 and ranking.verdict(low, high) == "better"
+
+
+def test_a_task_with_one_run_is_held_fixed_in_the_bootstrap() -> None:
+    rl = aggregates.load_rliable()[0]
+    if rl is None:
+        pytest.skip("rliable is not installed")
+    scores = {"bco": {"a": {0: 0.2, 1: 0.4, 2: 0.9}, "b": {0: 0.5}},
+              "abco": {"a": {0: 0.1}, "b": {0: 0.3}}}  # every sample of abco a single run
+    ranked = ranking.compute(scores, ["a", "b"], rl, reps=100)
+    assert ranked.runs == {"bco": [3, 1], "abco": [1, 1]}
+    assert ranked.mean["abco"] == pytest.approx((0.2, 0.2, 0.2))
+    point, low, high = ranked.mean["bco"]
+    assert low <= point <= high and low < high
