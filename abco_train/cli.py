@@ -193,14 +193,10 @@ def _bench_plan(args: argparse.Namespace) -> tuple[Any, list[Any]]:
 
         track = budget_variants(track, parse_list(args.budget_multiples),
                                 parse_list(args.tasks) if args.tasks else None)  # fmt: skip
-    named = {"validation": track.validation_seeds, "test": track.test_seeds}
-    text = named.get(args.seeds or "validation", args.seeds)
-    if not text:
-        raise ConfigError(f"track {track.name} names no {args.seeds} seeds; give them")
     methods = parse_list(args.methods) if args.methods else list(track.methods)
     tasks = parse_list(args.tasks) if args.tasks and args.budget_multiples is None else []
-    own = track.own_test_seeds() if args.seeds == "test" else None  # tasks' own test seeds
-    return track, plan_track(track, tasks, methods, parse_seeds(text), own)
+    seeds, own = track.grid_seeds(args.seeds or "validation")
+    return track, plan_track(track, tasks, methods, seeds, own)
 
 
 def _bench_options(parser: argparse.ArgumentParser) -> None:

@@ -52,7 +52,7 @@ def update_ms(batch: int, updates: int, once: bool) -> tuple[float, torch.Tensor
     def step() -> None:
         if once:
             pairs = (value.pair_input(s, s1), value.pair_input(s1, s2))
-            both = torch.cat(pairs)
+            both = value.stacked_input(*pairs)
         else:
             pairs = (per_pass_input(s, s1), per_pass_input(s1, s2))
             both = per_pass_input(torch.cat([s, s1]), torch.cat([s1, s2]))

@@ -119,15 +119,16 @@ def plan_track(track: Track, tasks: Sequence[str], methods: Sequence[str],
         ConfigError: An unknown task, no method or seed, a bad name, too many cells.
     """
     chosen = [track.task(name) for name in tasks] if tasks else list(track.tasks)
-    for given, what in ((methods, "--methods"), (seeds, "--seeds")):
-        if not given:
-            raise ConfigError(f"no {what} given: the grid would have no cell")
+    if not methods:
+        raise ConfigError("no --methods given: the grid would have no cell")
     for name in methods:
         try:
             check_name(name, "method")
         except RecordError as exc:
             raise ConfigError(f"--methods: {exc}") from None
     seeds_of = {t.name: list((own or {}).get(t.name, seeds)) for t in chosen}
+    if not all(seeds_of.values()):
+        raise ConfigError("no --seeds given: the grid would have no cell")
     n = len(methods) * sum(len(s) for s in seeds_of.values())
     if n > MAX_CELLS:
         raise ConfigError(f"{n:,} cells; a grid holds at most {MAX_CELLS:,}")

@@ -146,6 +146,21 @@ class Track:
         """``task -> its test seeds``, for the tasks whose own differ from the track's."""
         return {t.name: parse_seeds(t.test_seeds) for t in self.tasks if t.test_seeds}
 
+    def grid_seeds(self, given: str) -> tuple[list[int], dict[str, list[int]]]:
+        """The seeds of ``abco bench --seeds given``: ``validation`` or ``test`` (the track's,
+        and each task's own test seeds by task), or seeds written out.
+
+        Raises:
+            ConfigError: Bad seeds, or a name the track gives no seeds for.
+        """
+        if given not in ("validation", "test"):
+            return parse_seeds(given), {}
+        text = self.validation_seeds if given == "validation" else self.test_seeds
+        own = self.own_test_seeds() if given == "test" else {}
+        if not text and (not own or len(own) < len(self.tasks)):
+            raise ConfigError(f"track {self.name} names no {given} seeds; give them")
+        return (parse_seeds(text) if text else []), own
+
     def all_test_seeds(self) -> list[int]:
         """Every seed some task is tested on: the track's and the tasks' own."""
         seeds = set(parse_seeds(self.test_seeds)) if self.test_seeds else set()

@@ -75,10 +75,10 @@ class Search:
     read_when: tuple[tuple[str, Any], ...] = ()
 
     def reads(self, options: Any) -> bool:
-        """Whether a run with the resolved ``options`` (a mapping or an options object) reads
-        the setting."""
+        """Whether a run with the resolved ``options`` (a mapping or an options object; an
+        option it lacks counts as unset) reads the setting."""
         get = options.get if isinstance(options, Mapping) else partial(getattr, options)
-        return all(get(name) == value for name, value in self.read_when)
+        return all(get(name, None) == value for name, value in self.read_when)
 
     def suggest(self, trial: Any, name: str, kind: type) -> Any:
         """The value an Optuna ``trial`` suggests for the setting ``name`` of type ``kind``."""

@@ -145,6 +145,12 @@ class Method(ABC):
         return {}
 
     @classmethod
+    def fixed(cls, name: str) -> Mapping[str, Any]:
+        """Run settings the method always runs with, whatever the config gives: settings its
+        networks never read, recorded as it runs (none here)."""
+        return {}
+
+    @classmethod
     def resolve_options(cls, config: RunConfig) -> MethodOptions:
         """The run's options (:meth:`MethodOptions.for_run` of :attr:`Options`):
         ``config.method_options`` over the defaults for the run.

@@ -130,7 +130,9 @@ def options_class(name: str) -> type[MethodOptions]:
 
 
 def resolve_config(config: RunConfig) -> RunConfig:
-    """``config`` validated, with every default filled in, the method's own included, and
+    """``config`` validated, with every default filled in, the method's own included, the
+    settings the method fixes set (:meth:`~abco_train.methods.base.Method.fixed`: a record
+    of an older version that gave them otherwise resolves to the same run), and
     ``method_options`` replaced by the method's resolved options.
 
     Raises:
@@ -138,7 +140,8 @@ def resolve_config(config: RunConfig) -> RunConfig:
     """
     config.validate()
     method = get_method(config.method)
-    resolved = config.resolved(method.defaults(config.method)).validate()
+    resolved = config.resolved(method.defaults(config.method))
+    resolved = resolved.replace(**method.fixed(config.method)).validate()
     return resolved.replace(method_options=method.resolve_options(resolved).to_dict())
 
 

@@ -72,18 +72,27 @@ class IDMNet(nn.Module):
         """What the network reads of a batch of transitions, built once for callers that
         read the same transitions through several copies of the network (DILO's online and
         target utilities): ``(s, s' - s)`` on the last dim (frames scaled to ``[0, 1]``
-        first), or with ``pair`` both batches one after the other. The inputs of two
-        batches, concatenated on dim 0, are the input of the two batches concatenated."""
+        first), or with ``pair`` both batches one after the other (:meth:`stacked_input`
+        joins several)."""
         if not self.concat_inputs:
             return torch.cat([obs, next_obs], dim=0)
         if obs.dtype != torch.uint8:
             return torch.cat([obs, next_obs - obs], dim=-1)
         # frames: a signed difference needs floats; written into one buffer, not concatenated
         first = obs.float().div_(255.0)
-        out = torch.empty(*first.shape[:-1], 2, first.shape[-1], device=first.device)
+        out = torch.empty(*first.shape[:-1], 2, first.shape[-1], dtype=first.dtype,
+                          device=first.device)  # fmt: skip
         out[..., 0, :] = first
         torch.sub(next_obs.float().div_(255.0), first, out=out[..., 1, :])
         return out.flatten(-2)
+
+    def stacked_input(self, *inputs: torch.Tensor) -> torch.Tensor:
+        """The input of several batches' transitions at once, from each batch's
+        :meth:`pair_input`: the same as the input of the batches concatenated."""
+        if self.concat_inputs:
+            return torch.cat(inputs)
+        halves = [x.chunk(2, dim=0) for x in inputs]  # pair: each input is (s rows, s' rows)
+        return torch.cat([*(first for first, _ in halves), *(second for _, second in halves)])
 
     def from_input(self, x: torch.Tensor) -> torch.Tensor:
         """Action logits of :meth:`pair_input`'s ``x``."""

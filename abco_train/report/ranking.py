@@ -245,6 +245,9 @@ def section(scores: Scores, tasks: Sequence[str], out: Path, labels: Mapping[str
     ranking = compute(scores, tasks, rl, reps)
     for m, lacking in ranking.left_out.items():
         lines.append(f"- left out: {m} (no scored run on {', '.join(lacking)})")
+    if ranking.balanced:
+        lines.append("- runs per task differ: every method's aggregates and pairs weigh each"
+                     " task the same, every run kept (`scipy.stats.bootstrap`, not rliable)")
     if not ranking.runs:
         return [*head, *lines, "", "No IfO method has scored runs on every task.", "",
                 *pair_head, "Nothing to compare."], {}  # fmt: skip

@@ -35,8 +35,8 @@ def add_tune_options(parser: argparse.ArgumentParser) -> None:
                         "tuning.md and the trials' runs")  # fmt: skip
     parser.add_argument("--seeds", default=None,
                         help="the validation seeds a trial runs, some of the track's (e.g. "
-                        "100; default: all of them): the same for every method, and for "
-                        "every trial of a study")  # fmt: skip
+                        "100; default: all of them); every trial of a method's study runs "
+                        "the same: give every method the same")  # fmt: skip
     parser.add_argument("--jobs", type=count(MAX_JOBS), default=None,
                         help="a trial's cells at once (default: the cores)")
     parser.add_argument("--threads", type=count(MAX_THREADS), default=None,

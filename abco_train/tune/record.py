@@ -153,6 +153,8 @@ def _resolved(track: Track, method: str, family: str, rows: list[TrialRow]) -> l
 
     tasks = list(dict.fromkeys(key.rpartition("/seed")[0] for r in rows
                                if (r.method, r.family) == (method, family) for key in r.runs))
+    if not tasks:  # no run to tell the family's tasks by
+        return None
     try:
         return resolved_options(track, method, tasks)
     except (ConfigError, KeyError, ValueError):

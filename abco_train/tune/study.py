@@ -125,7 +125,7 @@ def _trial_seeds(spec: TuneSpec) -> list[int]:
     """
     validation = parse_seeds(spec.track.validation_seeds)
     if spec.seeds is None:
-        return validation
+        return sorted(validation)
     other = sorted(set(spec.seeds) - set(validation))
     if other:
         raise ConfigError(f"--seeds {', '.join(map(str, other))}: not among track "
@@ -143,7 +143,7 @@ def _check_same_seeds(study: Any, seeds: list[int]) -> None:
     """
     for trial in study.trials:
         ran = trial.user_attrs.get("seeds")
-        if ran is not None and list(ran) != seeds:
+        if ran is not None and sorted(ran) != seeds:
             raise ConfigError(f"study {study.study_name} ran its trials on seeds "
                               f"{', '.join(map(str, ran))}; --seeds must name the same "
                               f"(got {', '.join(map(str, seeds))})")  # fmt: skip

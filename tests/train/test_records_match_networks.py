@@ -7,6 +7,7 @@ import pytest
 import torch
 from train_testing import GAIFO_TINY, tiny_config
 
+from abco_train.config.run import RunConfig
 from abco_train.harness.runtime import seed_everything
 from abco_train.harness.training_data import load_training_data
 from abco_train.methods.registry import available, get_method, resolve_config
@@ -31,3 +32,17 @@ def test_the_recorded_attention_is_the_networks(tiny_data, tmp_path, name, env):
     cfg = resolve_config(tiny_config(env, name, tiny_data, tmp_path, device="cpu", **extra))
     method = get_method(name)(cfg, load_training_data(cfg), seed_everything(cfg.seed))
     assert _has_attention(method) is cfg.attention
+
+
+def test_ilpo_runs_without_attention_whatever_its_record_says(tmp_path) -> None:
+    """ILPO's networks read no ``attention``: ``--attention`` resolves to its run as it is,
+    and a record of an older version (which said ``true``) is the same run."""
+    from dataclasses import asdict
+
+    from abco_train.methods.registry import identity
+
+    given = RunConfig(env="CartPole-v1", method="ilpo", run_dir=str(tmp_path), attention=True)
+    assert resolve_config(given).attention is False
+    old = {**asdict(given), "attention": True}
+    assert identity(old) == identity(asdict(RunConfig(env="CartPole-v1", method="ilpo",
+                                                      run_dir=str(tmp_path))))  # fmt: skip

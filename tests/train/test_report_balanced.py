@@ -37,7 +37,7 @@ def test_every_task_weighs_the_same_however_many_runs_it_has() -> None:
     assert balanced.iqm([many, few]) == pytest.approx(0.5)
 
 
-def test_a_grid_with_fewer_seeds_on_some_tasks_keeps_every_run() -> None:
+def test_a_grid_with_fewer_seeds_on_some_tasks_keeps_every_run(tmp_path) -> None:
     rl = aggregates.load_rliable()[0]
     if rl is None:
         pytest.skip("rliable is not installed")
@@ -54,6 +54,9 @@ def test_a_grid_with_fewer_seeds_on_some_tasks_keeps_every_run() -> None:
         assert ranked.profile_cis[m].shape == (2, len(ranked.taus))
     p, low, high = ranked.pairs[("bco", "abco")]
     assert p == 1.0 and ranking.verdict(low, high) == "better"
+    lines, _ = ranking.section(scores, ["classic", "maze"], tmp_path, {}, [], reps=50)
+    assert any(line.startswith("- runs per task differ") for line in lines)
+    assert "| 10-20 |" in "\n".join(lines)
 
 
 def test_a_task_with_one_run_is_held_fixed_in_the_bootstrap() -> None:

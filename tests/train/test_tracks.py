@@ -146,6 +146,12 @@ def test_a_task_may_have_test_seeds_of_its_own(tmp_path):
                             "maze/bco/seed2000", "maze/bco/seed2001"]  # fmt: skip
     assert keys("validation") == ["cp/bco/seed100", "maze/bco/seed100"]
     assert keys("7") == ["cp/bco/seed7", "maze/bco/seed7"]
+    # every task with seeds of its own: the track needs none
+    path = _write(tmp_path, Path(path).read_text().replace('test_seeds = "2000-2003"',
+                                                      'validation_seeds = "101"', 1)
+                  .replace('validation_seeds = "100"\n', "", 1)
+                  .replace('budget = 100\n', 'budget = 100\ntest_seeds = "7"\n', 1))
+    assert keys("test") == ["cp/bco/seed7", "maze/bco/seed2000", "maze/bco/seed2001"]
 
 
 def test_method_settings_apply_to_their_method_only(tmp_path):

@@ -255,14 +255,14 @@ def test_other_datasets_make_another_run(tmp_path):
 ])  # fmt: skip
 def test_an_idm_reads_pair_inputs_built_once(space, idm_input) -> None:
     """``from_input(pair_input(s, s'))`` is the forward pass to the bit, and two batches' inputs
-    concatenated are the concatenated batches' input: DILO builds them once for its online
-    and its target utility."""
+    stacked are the concatenated batches' input: DILO builds them once for its online and its
+    target utility. Four unrelated batches: no frame of one pair stands for another's."""
     torch.manual_seed(0)
     _, idm = build_networks(space, 4, attention=False, idm_input=idm_input)
     idm.eval()  # no dropout draws between the passes compared
-    s, s1, s2 = (torch.as_tensor(np.stack([space.sample() for _ in range(5)])) for _ in range(3))
+    a, b, c, d = (torch.as_tensor(np.stack([space.sample() for _ in range(5)])) for _ in range(4))
     with torch.no_grad():
-        assert torch.equal(idm.from_input(idm.pair_input(s, s1)), idm(s, s1))
-        both = torch.cat([idm.pair_input(s, s1), idm.pair_input(s1, s2)])
-        assert torch.equal(both, idm.pair_input(torch.cat([s, s1]), torch.cat([s1, s2])))
-        assert torch.equal(idm.from_input(both), idm(torch.cat([s, s1]), torch.cat([s1, s2])))
+        assert torch.equal(idm.from_input(idm.pair_input(a, b)), idm(a, b))
+        both = idm.stacked_input(idm.pair_input(a, b), idm.pair_input(c, d))
+        assert torch.equal(both, idm.pair_input(torch.cat([a, c]), torch.cat([b, d])))
+        assert torch.equal(idm.from_input(both), idm(torch.cat([a, c]), torch.cat([b, d])))

@@ -184,7 +184,8 @@ class DILO(OfflineMethod):
         now = self.value.from_input(pairs[0])  # (n, 2): V(s, s'), twin heads; offline first
         after = self.value.from_input(pairs[1])  # V(s', s'')
         with torch.no_grad():  # the smaller target head, for both online heads (TwinQ's min)
-            target = self.target.from_input(torch.cat(pairs)).min(1, keepdim=True).values
+            both = self.value.stacked_input(*pairs)
+            target = self.target.from_input(both).min(1, keepdim=True).values
         forward_residual = opts.gamma * target[n:] - now
         backward_residual = opts.gamma * after - target[:n]
         forward = opts.lam * dual_loss(forward_residual[n_pre:], forward_residual[:n_pre],

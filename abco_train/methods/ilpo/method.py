@@ -148,9 +148,10 @@ class ILPO(LatentTraining, Method):
     options: ILPOOptions
 
     @classmethod
-    def defaults(cls, name: str) -> Mapping[str, Any]:
+    def fixed(cls, name: str) -> Mapping[str, Any]:
         """No self-attention: ILPO's networks have none (its paper's are plain), so its record
-        says so rather than the run-wide default."""
+        says so, whatever ``--attention`` says, and an older record that said otherwise is
+        the same run."""
         return {"attention": False}
 
     def __init__(self, config: RunConfig, data: TrainingData, rng: np.random.Generator) -> None:
