@@ -119,3 +119,20 @@ def test_unknown_families_are_refused() -> None:
     done = subprocess.run([sys.executable, str(ROOT / "tools" / "attack.py"), "--families",
                            "nosuch", "--list"], capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and "unknown families nosuch" in done.stderr
+
+
+def test_modern_diagnostics_reads_each_round_and_tabulates_the_last() -> None:
+    """``tools/modern_diagnostics.py``: a metric is read from each round's ``train`` block,
+    and the table gives the last round's mean over runs, its range and the probe's chance."""
+    diagnostics = importlib.import_module("modern_diagnostics")
+    from abco_train.report.runs import Run
+
+    run = Run("cartpole-authors-data", "lapo", 100, ROOT, None)
+    run._history = [{"iteration": 0, "train": {"probe_accuracy": 0.5}},
+                    {"iteration": 1, "train": {"other": 1.0}},
+                    {"iteration": 2, "train": {"probe_accuracy": 0.9}}]  # fmt: skip
+    assert diagnostics.per_round(run, "probe_accuracy") == [0.5, 0.9]
+    found = {"lapo": {"cartpole-authors-data": [[0.5, 0.9], [0.7]]}}
+    text = diagnostics.table(found, {"cartpole-authors-data": "CartPole-v1"})
+    assert "| lapo | probe_accuracy | cartpole-authors-data | 2 | 0.800 | 0.700-0.900 | 0.50 |" \
+        in text
