@@ -85,6 +85,7 @@ def plot(found: dict[str, dict[str, list[list[float]]]], envs: dict[str, str],
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
     lapo = sorted(found.get("lapo", {}).items())
@@ -101,6 +102,7 @@ def plot(found: dict[str, dict[str, list[list[float]]]], envs: dict[str, str],
     right.axhline(1.0, color="grey", linestyle="dashed")
     right.set(yscale="log", xlabel="round", ylabel="expert / pre-demonstration weight",
               title="DILO: mean weight exp(tau V) on expert transitions")
+    right.xaxis.set_major_locator(MaxNLocator(integer=True))
     right.legend(fontsize="small")
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
