@@ -120,9 +120,8 @@ def _markdown(rows: list[TrialRow], track: Track) -> list[str]:
     from abco_train.tune.space import describe
 
     best = best_trials(rows)
-    seeds = sorted({s for r in rows for s in r.seeds})
     lines = [f"# Tuning record: {escape(track.name, 80)}", "",
-             f"Validation seeds {', '.join(map(str, seeds)) or 'none yet'} (maze runs on "
+             f"Validation seeds {_seeds_by_family(rows)} (maze runs on "
              "validation layouts). A trial's value is the mean headline score of its runs, a "
              "failed run counting 0; the first trial runs the method's defaults (the next "
              "where it was cut short and run again); a tie keeps the earlier trial.", "",
@@ -143,6 +142,16 @@ def _markdown(rows: list[TrialRow], track: Track) -> list[str]:
         lines.append(f"| {r.family} | {escape(r.method, 60)} | {r.trial} | {r.value:.3f} | "
                      f"{len(r.failures)} | {_settings(r.params)} |")
     return lines
+
+
+def _seeds_by_family(rows: list[TrialRow]) -> str:
+    """``"classic 100, 101, 102; maze 100"``: each family's seeds, since a family whose cells
+    cost more may be tuned on fewer of them."""
+    families = {r.family: set[int]() for r in rows}
+    for r in rows:
+        families[r.family].update(r.seeds)
+    return "; ".join(f"{family} {', '.join(map(str, sorted(seeds)))}"
+                     for family, seeds in sorted(families.items())) or "none yet"
 
 
 def _resolved(track: Track, method: str, family: str, rows: list[TrialRow]) -> list[Any] | None:

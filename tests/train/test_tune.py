@@ -135,6 +135,16 @@ def test_every_method_gets_the_same_trials_and_a_resume_adds_only_new_ones(tmp_p
     assert sorted(r.trial for r in rows if r.method == "bc") == [0, 1, 2, 3]
     assert first.stat().st_mtime_ns == stamp  # finished trials are not run again
     assert "| classic | bco | 4 |" in (out / "tuning.md").read_text()
+    assert "Validation seeds classic 100 (" in (out / "tuning.md").read_text()
+
+
+def test_the_record_names_each_familys_own_seeds() -> None:
+    from abco_train.tune.record import _seeds_by_family
+
+    rows = [TrialRow("headline", family, "bc", 0, True, 0.5, seeds=seeds)
+            for family, seeds in (("maze", [100]), ("classic", [101, 100, 102]))]
+    assert _seeds_by_family(rows) == "classic 100, 101, 102; maze 100"
+    assert _seeds_by_family([]) == "none yet"
 
 
 def test_an_interrupted_trial_is_queued_again_with_its_settings() -> None:
