@@ -32,7 +32,7 @@ every record says which task and budget it ran under.
 Example:
     >>> track = load_track("headline")
     >>> len(track.tasks) >= 7, track.test_seeds
-    (True, '1000-1009')
+    (True, '2000-2019')
     >>> task = track.task(track.tasks[0].name)
     >>> task.config()["budget"] == task.budget
     True

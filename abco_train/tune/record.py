@@ -45,7 +45,7 @@ class TrialRow:
     #: ``{task}/seed{seed} -> score`` (``None``: the run failed; it counted 0)
     runs: dict[str, float | None] = field(default_factory=dict)
     seeds: list[int] = field(default_factory=list)
-    #: The track's test seeds when the trial ran (none of them may be among ``seeds``).
+    #: The track's test seeds when the record was written (none may be among ``seeds``).
     test_seeds: list[int] = field(default_factory=list)
     failures: list[str] = field(default_factory=list)
     seconds: float = 0.0
