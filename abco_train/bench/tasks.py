@@ -129,6 +129,14 @@ class Track:
     methods: tuple[str, ...] = ()
     validation_seeds: str = ""
     test_seeds: str = ""
+    #: The track whose tuning this one takes (``""``: its own); a budget curve's track,
+    #: which only varies budgets, takes the track it varies (:func:`budget_variants`).
+    tuned_as: str = ""
+
+    @property
+    def tuning_name(self) -> str:
+        """The name an ``abco tune`` record of this track's settings carries."""
+        return self.tuned_as or self.name
 
     def task(self, name: str) -> Task:
         """The task called ``name``.
@@ -310,6 +318,8 @@ def budget_variants(track: Track, multiples: Sequence[int | str],
         >>> task = curves.task("lunarlander@x16")
         >>> task.budget, task.method_options["gaifo"]["rl_steps"]
         (640000, 640000)
+        >>> curves.name, curves.tuning_name  # the headline's tuned settings apply
+        ('headline-budget-curves', 'headline')
 
     Raises:
         ConfigError: No multiple, one that is not a whole number from 2 to ``MAX_MULTIPLE``,
@@ -344,4 +354,4 @@ def budget_variants(track: Track, multiples: Sequence[int | str],
         raise ConfigError(f"{len(variants):,} budget variants; a track has at most "
                           f"{MAX_TASKS:,}")  # fmt: skip
     return dataclasses.replace(track, name=f"{track.name}-budget-curves",
-                               tasks=tuple(variants))  # fmt: skip
+                               tasks=tuple(variants), tuned_as=track.tuning_name)  # fmt: skip

@@ -229,8 +229,9 @@ def load_choices(path: str | Path, track: Track
     sets nothing a tuner could not have chosen).
 
     Raises:
-        ConfigError: Not a choices file of this format, another track's, an unknown method or
-            family, a setting outside its method's search space.
+        ConfigError: Not a choices file of this format, another track's (a budget curve's
+            track takes the choices of the track it varies), an unknown method or family, a
+            setting outside its method's search space.
     """
     from abco_train.config.fields import ConfigError
     from abco_train.harness.run_folder import RunFolderError, read_capped
@@ -244,9 +245,9 @@ def load_choices(path: str | Path, track: Track
     if not isinstance(data, dict) or data.get("format") != FORMAT or not isinstance(
             data.get("choices"), dict):  # fmt: skip
         raise ConfigError(f"{where} is not an `abco tune` choices.json (format {FORMAT})")
-    if data.get("track") != track.name:
+    if data.get("track") != track.tuning_name:
         raise ConfigError(f"{where} was tuned on track {escape(data.get('track'), 80)!r}, "
-                          f"not {track.name!r}")  # fmt: skip
+                          f"not {track.tuning_name!r}")  # fmt: skip
     out = {}
     for method, families in data["choices"].items():
         if not isinstance(families, dict):

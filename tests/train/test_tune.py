@@ -245,6 +245,18 @@ def test_a_grid_runs_with_the_chosen_settings_of_each_method(tmp_path: Path) -> 
     assert random["lr"] != 0.002  # another method's choice is not this one's
 
 
+def test_a_budget_curve_takes_the_choices_of_the_track_it_varies(tmp_path: Path) -> None:
+    track = tmp_path / "track.toml"
+    track.write_text(TRACK)
+    out = tmp_path / "curves"
+    argv = ["bench", "--track", str(track), "--seeds", "test", "--methods", "bc",
+            "--budget-multiples", "2", "--choices", str(_choices(tmp_path)), "--out", str(out),
+            "--quiet", "--jobs", "1"]  # fmt: skip
+    assert main(argv) == 0
+    bc = json.loads((out / "cp@x2/bc/seed1000/config.json").read_text())
+    assert bc["lr"] == 0.002 and bc["budget"] == 10000  # the task's 5,000, twice
+
+
 @pytest.mark.parametrize(("changes", "message"), [
     ({"track": "other"}, "tuned on track 'other'"),
     ({"format": 0}, "not an `abco tune` choices.json"),
