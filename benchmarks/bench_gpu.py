@@ -155,12 +155,11 @@ def main() -> int:
                              "CUDA tests the check stays under 8 minutes)")
     parser.add_argument("--tiny", action="store_true", help="seconds: CartPole, two methods")
     args = parser.parse_args()
-    from abco_train.bench.cells import parse_seeds
     from abco_train.bench.tasks import load_track
 
     track = load_track("headline")
-    if args.seed in parse_seeds(track.test_seeds):  # timings need no test seed: none is spent
-        print(f"error: seed {args.seed} is a test seed; use a validation seed "
+    if (why := track.why_not_validation(args.seed)) is not None:  # timings spend no test seed
+        print(f"error: seed {args.seed} is {why}; use a validation seed "
               f"({track.validation_seeds})", file=sys.stderr)
         return 2
     if args.tiny:

@@ -210,12 +210,11 @@ def main() -> int:
         task, method = args.cell.split(",")
         print(json.dumps(run_cell(task, method, args.seed, args.out, args.tiny)))
         return 0
-    from abco_train.bench.cells import parse_seeds
     from abco_train.bench.tasks import load_track
 
     track = load_track("headline")
-    if args.seed in parse_seeds(track.test_seeds):
-        print(f"error: seed {args.seed} is a test seed; profile on validation seeds "
+    if (why := track.why_not_validation(args.seed)) is not None:  # a test seed runs once
+        print(f"error: seed {args.seed} is {why}; profile on validation seeds "
               f"({track.validation_seeds})", file=sys.stderr)
         return 2
     if args.tiny:

@@ -68,9 +68,14 @@ def test_bench_gpu_runs_every_cuda_test():
     assert marked == sorted(CUDA_TEST_FILES)
 
 
-def test_bench_phases_refuses_a_test_seed(tmp_path):
+@pytest.mark.parametrize(("seed", "message"), [
+    ("2000", "is a test seed"),  # the track's
+    ("2019", "is a test seed"),  # the classic tasks' only: the mazes test 2000-2009
+    ("1000", "is not a validation seed"),  # the v1 grid's
+])
+def test_bench_phases_refuses_a_seed_outside_validation(tmp_path, seed, message):
     done = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_phases.py"),
-                           "--seed", "1000", "--out", str(tmp_path)],
+                           "--seed", seed, "--out", str(tmp_path)],
                           cwd=tmp_path, capture_output=True, text=True, timeout=120,
                           env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
-    assert done.returncode == 2 and "is a test seed" in done.stderr
+    assert done.returncode == 2 and message in done.stderr

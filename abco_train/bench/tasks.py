@@ -169,6 +169,19 @@ class Track:
             raise ConfigError(f"track {self.name} names no {given} seeds; give them")
         return (parse_seeds(text) if text else []), own
 
+    def why_not_validation(self, seed: int) -> str | None:
+        """Why ``seed`` may not serve a choice or a measurement (``None``: it is one of the
+        track's validation seeds): ``"a test seed"`` or ``"not a validation seed"``.
+
+        Example:
+            >>> track = load_track("headline")
+            >>> track.why_not_validation(100), track.why_not_validation(2000)
+            (None, 'a test seed')
+        """
+        if self.validation_seeds and seed in parse_seeds(self.validation_seeds):
+            return None
+        return "a test seed" if seed in self.all_test_seeds() else "not a validation seed"
+
     def all_test_seeds(self) -> list[int]:
         """Every seed some task is tested on: the track's and the tasks' own."""
         seeds = set(parse_seeds(self.test_seeds)) if self.test_seeds else set()
