@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -139,16 +140,19 @@ def test_modern_diagnostics_reads_each_round_and_tabulates_the_last() -> None:
 
 
 def test_seed_precision_predicts_the_width_by_hand(tmp_path: Path) -> None:
-    """``tools/seed_precision.py``: a run without a headline score counts 0, and the normal
-    width is ``2 * 1.96 * sqrt(sum_t var_t / n_t) / tasks``."""
+    """``tools/seed_precision.py``: scores floored at 0 and runs without one left out, as in
+    the report; the normal width is ``2 * 1.96 * sqrt(sum_t var_t / n_t) / tasks``; the
+    bootstrap's intervals of a task with one value repeated have no width."""
     precision = importlib.import_module("seed_precision")
     rows = [{"method": "bco", "task": task, "final": {"headline": "episodes",
              "episodes": {"score": score}}} for task, score in
-            (("a", 0.0), ("a", 1.0), ("b", 0.5), ("b", 0.5))]  # fmt: skip
-    rows.append({"method": "bco", "task": "b", "final": None})  # failed: counts 0
+            (("a", -0.5), ("a", 1.0), ("b", 0.5), ("b", 0.5), ("b", 0.0))]  # fmt: skip
+    rows.append({"method": "bco", "task": "b", "final": None})  # failed: left out
     (tmp_path / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
     by_task = precision.scores(tmp_path / "results.jsonl")["bco"]
     assert by_task == {"a": [0.0, 1.0], "b": [0.5, 0.5, 0.0]}
     expected = 2 * 1.96 * (0.5 / 2 + (1 / 12) / 3) ** 0.5 / 2  # var_a 0.5, var_b 1/12
     assert abs(precision.normal_width(by_task, {"a": 2, "b": 3}) - expected) < 1e-12
+    rng = np.random.default_rng(0)
+    assert precision.bootstrap_widths({"a": [0.3, 0.3]}, {"a": 5}, 2, rng) == (0.0, 0.0)
     assert precision.main([str(tmp_path / "nowhere")]) == 2

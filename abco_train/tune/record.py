@@ -150,7 +150,7 @@ def _seeds_by_family(rows: list[TrialRow]) -> str:
     families = {r.family: set[int]() for r in rows}
     for r in rows:
         families[r.family].update(r.seeds)
-    return "; ".join(f"{family} {', '.join(map(str, sorted(seeds)))}"
+    return "; ".join(f"{family} {', '.join(map(str, sorted(seeds))) or 'none'}"
                      for family, seeds in sorted(families.items())) or "none yet"
 
 

@@ -370,8 +370,30 @@ def test_goals_are_checked_with_their_figures(reported: dict[str, Any]) -> None:
         # every method of the grid is precise; DILO and LAPO, in the track, were not run
         assert lines[4].startswith("- missed: precision") and "Too wide" not in lines[4]
         assert lines[4].endswith("No aggregate: DILO; LAPO")
+        assert lines[5].startswith("- missed: precision, every IfO method's mean score 95% "
+                                   "interval at most 0.10 wide")
+        lines = lines[:5] + lines[6:]
     assert lines[5].startswith("- met: no run over its task's budget")
     assert lines[6].startswith("- not checked: wall time")
+
+
+def test_precision_checks_the_iqm_strictly_and_the_mean_inclusively() -> None:
+    from abco_train.report.headline import IFO_METHODS
+    from abco_train.report.headline_goals import _label, _precision
+
+    def row(method: str, mean_width: float, iqm_width: float) -> dict[str, Any]:
+        return {"table": "headline-aggregate", "metric": "score", "method": method,
+                "ci_low": 0.0, "ci_high": mean_width, "iqm_ci_low": 0.0,
+                "iqm_ci_high": iqm_width}  # fmt: skip
+
+    methods = list(IFO_METHODS)
+    rows = [row(m, 0.05, 0.05) for m in methods]
+    assert [x.split(":")[0] for x in _precision(rows)] == ["- met", "- met"]
+    rows[0] = row(methods[0], 0.10, 0.10)  # at the goal: the mean's met, the IQM's not
+    iqm, mean = _precision(rows)
+    assert iqm.startswith("- missed") and iqm.endswith("Too wide: " + _label(methods[0]))
+    assert mean.startswith("- met: precision, every IfO method's mean score")
+    assert _precision(rows[1:])[1].endswith(f"No aggregate: {_label(methods[0])}")
 
 
 def test_a_run_over_its_budget_misses_the_goal(tmp_path: Path) -> None:
